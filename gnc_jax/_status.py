@@ -1,0 +1,18 @@
+"""Outcome status of a run, shared by every simulator (like diffrax's RESULTS).
+
+A run that is not ``ok`` is counted and flagged in the results and left out of the statistics.
+"""
+
+import enum
+
+
+class Status(enum.IntEnum):
+    ok = 0
+    nan = 1  # the state or an outcome became NaN or infinite
+    skip_out = 2  # capsule: skipped out of the atmosphere
+    no_convergence = 3  # an iteration (corrector, targeter) did not converge
+    time_out = 4  # the run did not reach its terminal condition in the allotted time
+
+    @classmethod
+    def name_of(cls, code: int) -> str:
+        return cls(int(code)).name

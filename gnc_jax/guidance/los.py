@@ -1,0 +1,88 @@
+"""LOS switching-curve terminal guidance (seed 000 §3; SPEC §3) — "the impactor law".
+
+The engine opens when the LOS rate |omega| reaches the switching curve omega_open of the miss
+tolerance rho_max = k1 sqrt(E^2 + F^2) and closes at omega_close of rho_min = k2 sqrt(E^2 + F^2),
+with E, F the B-plane error-ellipse semi-axes of the navigation covariance mapped to impact.
+Between the curves the engine keeps its previous state (hysteresis, §3.3). Thrust is
+perpendicular to the relative velocity in the plane of rho and rho_dot (eq. 19), with the sign
+that reduces |omega|.
+"""
+
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._types import Scalar
+from ..geometry.ellipse import b_plane_position_covariance, mean_position_error
+from ..geometry.los import los_rate, range_rate, zero_effort_miss
+from .base import AbstractImpactorGuidance, EngineCommand, ImpactorGuidanceContext, safe_unit
+
+
+def switching_curve(rho, rho_dot_scalar, rho_limit):
+    """LOS rate at which the unforced miss equals ``rho_limit`` (seed 000 eq. 20), rad/s.
+
+    omega = -rho_limit rho_dot / sqrt(rho^4 - rho_limit^2 rho^2). Infinite when rho <= rho_limit
+    (no LOS rate can produce that miss any more).
+    """
+    arg = rho**4 - rho_limit**2 * rho**2
+    ok = arg > 0.0
+    return jnp.where(ok, -rho_limit * rho_dot_scalar / jnp.sqrt(jnp.where(ok, arg, 1.0)), jnp.inf)
+
+
+class LOSGuidanceState(NamedTuple):
+    engine_on: Scalar  # 0/1 (hard) or in [0, 1] (relaxed)
+    sigma_b_m: Scalar  # sqrt(E^2 + F^2) at the last image, m
+    omega: Scalar  # |omega| at the last step, rad/s (diagnostics, Fig. 3)
+    omega_open: Scalar
+    omega_close: Scalar
+
+
+class LOSSwitchingCurveGuidance(AbstractImpactorGuidance):
+    """Seed 000 LOS law. Gains ``k1``, ``k2`` (paper: 4, 1) are differentiable leaves.
+
+    With ``relaxed=True`` the hysteresis switch is replaced by its smooth relaxation
+    ``s = p_on + (1 - p_on)(1 - p_off) s_prev`` with ``p_on = sigmoid((|w|/w_open - 1)/T)`` and
+    ``p_off = sigmoid((1 - |w|/w_close)/T)`` (temperature ``T``), so gradients with respect to
+    k1 and k2 exist; it reduces to the hard logic as T -> 0. Evaluation uses the hard logic.
+    """
+
+    k1: Scalar = 4.0
+    k2: Scalar = 1.0
+    temperature: Scalar = 0.05
+    relaxed: bool = eqx.field(static=True, default=False)
+
+    def init(self, nav, ctx: ImpactorGuidanceContext) -> LOSGuidanceState:
+        z = jnp.zeros(())
+        return self.plan(LOSGuidanceState(z, z, z, z, z), nav, 0.0, ctx)
+
+    def plan(self, state, nav, t, ctx: ImpactorGuidanceContext) -> LOSGuidanceState:
+        # Error ellipse of the predicted impact point (eqs. 8-11), t_go = rho / |V_inf| (eq. 9).
+        rho = ctx.aim_point(t) - nav.r
+        t_go = jnp.linalg.norm(rho) / jnp.linalg.norm(nav.v)
+        d = b_plane_position_covariance(nav.p, t_go, ctx.c_bi)
+        return state._replace(sigma_b_m=mean_position_error(d))
+
+    def step(self, state, nav, t, ctx: ImpactorGuidanceContext):
+        rho = ctx.aim_point(t) - nav.r
+        rho_dot = -nav.v  # the target is the origin; the aim point is fixed to it
+        rho_n = jnp.linalg.norm(rho)
+        rdot = range_rate(rho, rho_dot)
+        omega = jnp.linalg.norm(los_rate(rho, rho_dot))
+        w_open = switching_curve(rho_n, rdot, self.k1 * state.sigma_b_m)
+        w_close = switching_curve(rho_n, rdot, self.k2 * state.sigma_b_m)
+        if self.relaxed:
+            p_on = jax.nn.sigmoid((omega / w_open - 1.0) / self.temperature)
+            p_off = jax.nn.sigmoid((1.0 - omega / w_close) / self.temperature)
+            on = p_on + (1.0 - p_on) * (1.0 - p_off) * state.engine_on
+        else:
+            on = jnp.where(
+                omega >= w_open, 1.0, jnp.where(omega <= w_close, 0.0, state.engine_on)
+            )
+        on = jnp.where(t < ctx.cutoff_time_s, on, 0.0)
+        # Eq. 19 up to sign: the zero-effort-miss direction -rho_dot x (rho_dot x rho) points
+        # from the impactor to the closest-approach offset, so thrusting along it reduces |omega|.
+        direction = safe_unit(zero_effort_miss(rho, rho_dot), ctx.c_bi[1])
+        new_state = LOSGuidanceState(on, state.sigma_b_m, omega, w_open, w_close)
+        return EngineCommand(on, direction), new_state

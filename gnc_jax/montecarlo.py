@@ -1,0 +1,184 @@
+"""Monte Carlo studies: one ``vmap``ped single-trajectory simulator, sharded over host devices.
+
+Run ``i`` of a study with root seed ``s`` always uses the key
+``jax.random.fold_in(jax.random.key(s), i)``, so a run's result never depends on the batch size,
+the chunking or the number of devices. Batches are split over the host devices (one per core,
+see ``gnc_jax._config``) with ``shard_map``; long studies run in chunks with a progress bar.
+Compilation happens once, ahead of time, and is timed separately from the study.
+"""
+
+import dataclasses
+import sys
+import time
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import Mesh, PartitionSpec
+
+from ._status import Status
+from .scenario import Scenario, ScenarioError
+from .simulation import impactor
+
+
+@dataclasses.dataclass(frozen=True)
+class System:
+    """How a scenario kind is built and simulated."""
+
+    build: Callable  # scenario -> (sim, law)
+    simulate: Callable  # (sim, law, key, record=False) -> (outcome NamedTuple, trace)
+
+
+SYSTEMS: dict[str, System] = {"impactor": System(impactor.build, impactor.simulate)}
+
+
+def run_key(seed: int, index):
+    """The key of run ``index`` of a study with root seed ``seed``."""
+    return jax.random.fold_in(jax.random.key(jnp.asarray(seed, dtype=jnp.uint32)), index)
+
+
+def batch_function(system: System, n_devices: int | None = None):
+    """``f(sim, law, seed, indices) -> outcomes`` vmapped over run indices, sharded over devices.
+
+    ``indices`` must have a length divisible by the number of devices.
+    """
+    devices = jax.devices()[: n_devices or len(jax.devices())]
+
+    def per_device(sim, law, seed, indices):
+        return jax.vmap(lambda i: system.simulate(sim, law, run_key(seed, i))[0])(indices)
+
+    if len(devices) == 1:
+        return jax.jit(per_device), 1
+    mesh = Mesh(np.array(devices), ("runs",))
+    rep = PartitionSpec()
+    sharded = jax.shard_map(
+        per_device,
+        mesh=mesh,
+        in_specs=(rep, rep, rep, PartitionSpec("runs")),
+        out_specs=PartitionSpec("runs"),
+        check_vma=False,
+    )
+    return jax.jit(sharded), len(devices)
+
+
+@dataclasses.dataclass
+class Study:
+    """Result of a Monte Carlo study.
+
+    Attributes:
+        outcomes: per-run arrays keyed by outcome field (first axis = run index).
+        compile_s: ahead-of-time compilation time; wall_s: the study's wall time after it.
+    """
+
+    scenario: Scenario
+    runs: int
+    seed: int
+    outcomes: dict[str, np.ndarray]
+    compile_s: float
+    wall_s: float
+    n_devices: int
+    chunk_size: int
+
+    @property
+    def status(self) -> np.ndarray:
+        return self.outcomes["status"]
+
+    @property
+    def ok(self) -> np.ndarray:
+        return self.status == Status.ok
+
+    def summary(self) -> dict[str, Any]:
+        from .results import summarize
+
+        return summarize(self)
+
+    def save(self, out_dir) -> dict[str, str]:
+        from .results import save_study
+
+        return save_study(self, out_dir)
+
+
+def _nan_to_status(outcomes: dict[str, np.ndarray]) -> None:
+    """Flag any run with a non-finite float outcome as ``nan`` (in place)."""
+    bad = np.zeros(outcomes["status"].shape, bool)
+    for name, arr in outcomes.items():
+        if np.issubdtype(arr.dtype, np.floating):
+            bad |= ~np.isfinite(arr.reshape(arr.shape[0], -1)).all(axis=1)
+    outcomes["status"] = np.where(bad & (outcomes["status"] == Status.ok), Status.nan,
+                                  outcomes["status"]).astype(np.int32)
+
+
+def run_study(
+    scenario: Scenario,
+    runs: int | None = None,
+    seed: int | None = None,
+    chunk_size: int | None = None,
+    progress: bool | None = None,
+    n_devices: int | None = None,
+) -> Study:
+    """Run a Monte Carlo study of ``scenario``.
+
+    Args:
+        scenario: from :func:`gnc_jax.load_scenario`.
+        runs: number of runs (default: the scenario's paper run count).
+        seed: root seed (default: the scenario's).
+        chunk_size: runs per compiled call (default: all runs in chunks of at most 1024).
+        progress: show a progress bar (default: when stderr is a terminal and there are
+            several chunks).
+        n_devices: host devices to shard over (default: all).
+    """
+    runs = scenario.runs if runs is None else runs
+    seed = scenario.seed if seed is None else seed
+    if isinstance(runs, bool) or not isinstance(runs, int) or runs <= 0:
+        raise ScenarioError(f"runs: {runs!r}; allowed: an integer >= 1")
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**32:
+        raise ScenarioError(f"seed: {seed!r}; allowed: an integer in [0, 2^32)")
+    if chunk_size is not None and (not isinstance(chunk_size, int) or chunk_size <= 0):
+        raise ScenarioError(f"chunk_size: {chunk_size!r}; allowed: an integer >= 1")
+    system = SYSTEMS[scenario.kind]
+    sim, law = system.build(scenario)
+    fn, n_dev = batch_function(system, n_devices)
+    chunk = min(runs, chunk_size or 1024)
+    chunk = -(-chunk // n_dev) * n_dev  # whole number of runs per device
+    n_chunks = -(-runs // chunk)
+
+    seed_arr = jnp.asarray(seed, dtype=jnp.uint32)
+    t0 = time.perf_counter()
+    compiled = fn.lower(sim, law, seed_arr, jnp.arange(chunk)).compile()
+    compile_s = time.perf_counter() - t0
+
+    show = progress if progress is not None else (n_chunks > 1 and sys.stderr.isatty())
+    bar = None
+    if show:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=runs, desc=scenario.name, unit="run", disable=not show)
+    parts = []
+    t0 = time.perf_counter()
+    for c in range(n_chunks):
+        idx = jnp.arange(c * chunk, (c + 1) * chunk)
+        out = jax.block_until_ready(compiled(sim, law, seed_arr, idx))
+        parts.append(jax.tree_util.tree_map(np.asarray, out))
+        if bar is not None:
+            bar.update(min(chunk, runs - c * chunk))
+    wall_s = time.perf_counter() - t0
+    if bar is not None:
+        bar.close()
+    fields = parts[0]._fields
+    outcomes = {
+        name: np.concatenate([getattr(p, name) for p in parts])[:runs] for name in fields
+    }
+    _nan_to_status(outcomes)
+    return Study(scenario, runs, seed, outcomes, compile_s, wall_s, n_dev, chunk)
+
+
+def simulate_one(scenario: Scenario, index: int = 0, seed: int | None = None, record=True):
+    """Run ``index`` of a study alone (same key as in the batch), with its trace."""
+    system = SYSTEMS[scenario.kind]
+    sim, law = system.build(scenario)
+    seed = scenario.seed if seed is None else seed
+    fn = jax.jit(lambda s, l, k: system.simulate(s, l, k, record=record))
+    out, trace = fn(sim, law, run_key(seed, index))
+    return jax.tree_util.tree_map(np.asarray, out), jax.tree_util.tree_map(np.asarray, trace)

@@ -1,0 +1,132 @@
+"""Study results: summary statistics, ``summary.json``, ``runs.parquet`` and the resolved TOML.
+
+Only runs whose status is ``ok`` enter the statistics; the others are counted in ``failed``
+(with a count per status) and flagged in ``runs.parquet``.
+"""
+
+import json
+import os
+import pathlib
+import platform
+from typing import Any
+
+import numpy as np
+
+from ._status import Status
+
+
+def _machine_note(study) -> str:
+    import jax
+
+    return (f"{platform.machine()} {os.cpu_count()} cores, {study.n_devices} XLA host devices, "
+            f"jax {jax.__version__}, {platform.python_implementation()} "
+            f"{platform.python_version()}")
+
+
+def _impactor_stats(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
+    miss = o["miss_m"][ok]
+    dv = o["dv_mps"][ok]
+    firings = o["firings"][ok]
+    if miss.size == 0:
+        return {}
+    counts = np.bincount(firings)
+    return dict(
+        miss_rms_m=float(np.sqrt(np.mean(miss**2))),
+        miss_mean_m=float(np.mean(miss)),
+        miss_max_m=float(np.max(miss)),
+        miss_p99_m=float(np.percentile(miss, 99)),
+        miss_t_mean_m=float(np.mean(o["miss_t_m"][ok])),
+        miss_r_mean_m=float(np.mean(o["miss_r_m"][ok])),
+        dv_mean_mps=float(np.mean(dv)),
+        dv_std_mps=float(np.std(dv)),
+        dv_max_mps=float(np.max(dv)),
+        firings_mean=float(np.mean(firings)),
+        firings_max=int(np.max(firings)),
+        firings_mode=int(np.argmax(counts)),
+        firings_histogram={int(k): int(v) for k, v in enumerate(counts) if v},
+        fuel_mean_kg=float(np.mean(o["fuel_kg"][ok])),
+    )
+
+
+STATS = {"impactor": _impactor_stats}
+
+
+def summarize(study) -> dict[str, Any]:
+    """The ``summary.json`` content of a study."""
+    status = study.outcomes["status"]
+    ok = status == Status.ok
+    failed = {Status(int(s)).name: int(np.sum(status == s)) for s in np.unique(status) if s != 0}
+    sc = study.scenario
+    out: dict[str, Any] = dict(
+        scenario=sc.name,
+        kind=sc.kind,
+        description=sc.description,
+        runs=study.runs,
+        failed=int(np.sum(~ok)),
+        failed_by_status=failed,
+        seed=study.seed,
+        wall_s=round(study.wall_s, 4),
+        compile_s=round(study.compile_s, 4),
+        runs_per_s=round(study.runs / study.wall_s, 2) if study.wall_s > 0 else None,
+        chunk_size=study.chunk_size,
+        machine=_machine_note(study),
+    )
+    if sc.kind == "impactor":
+        out["law"] = sc.config["guidance"]["law"]
+    out.update(STATS[sc.kind](study.outcomes, ok))
+    out["paper"] = dict(sc.paper)
+    return out
+
+
+def runs_table(study):
+    """One row per run: index, status, outcomes and dispersion draws (vectors split in columns)."""
+    import pyarrow as pa
+
+    cols: dict[str, Any] = {"run": np.arange(study.runs)}
+    status = study.outcomes["status"]
+    cols["status"] = status
+    cols["status_name"] = [Status(int(s)).name for s in status]
+    for name, arr in study.outcomes.items():
+        if name == "status":
+            continue
+        if arr.ndim == 1:
+            cols[name] = arr
+        else:
+            flat = arr.reshape(arr.shape[0], -1)
+            for j in range(flat.shape[1]):
+                cols[f"{name}_{j}"] = flat[:, j]
+    return pa.table(cols)
+
+
+def save_study(study, out_dir) -> dict[str, str]:
+    """Write ``summary.json``, ``runs.parquet`` and ``scenario.toml`` into ``out_dir``."""
+    import pyarrow.parquet as pq
+
+    out = pathlib.Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {
+        "summary": out / "summary.json",
+        "runs": out / "runs.parquet",
+        "scenario": out / "scenario.toml",
+    }
+    paths["summary"].write_text(json.dumps(study.summary(), indent=2) + "\n")
+    pq.write_table(runs_table(study), paths["runs"])
+    paths["scenario"].write_text(study.scenario.to_toml())
+    return {k: str(v) for k, v in paths.items()}
+
+
+def load_results(out_dir) -> tuple[dict, "Any", "Any"]:
+    """Read back ``(summary, runs table as a dict of numpy arrays, scenario)`` from a run dir."""
+    import pyarrow.parquet as pq
+
+    from .scenario import load_scenario
+
+    out = pathlib.Path(out_dir)
+    for name in ("summary.json", "runs.parquet", "scenario.toml"):
+        if not (out / name).is_file():
+            raise FileNotFoundError(f"{out / name}: missing; run `gnc-jax run ... --out {out}`")
+    summary = json.loads((out / "summary.json").read_text())
+    table = pq.read_table(out / "runs.parquet")
+    runs = {c: table.column(c).to_numpy(zero_copy_only=False) for c in table.column_names}
+    scenario = load_scenario(out / "scenario.toml")
+    return summary, runs, scenario

@@ -1,0 +1,7 @@
+"""Scenarios: packaged TOML files and user files, validated before anything is compiled."""
+
+from .loader import Scenario, list_scenarios, load_scenario, packaged_names
+from .schema import Field, ScenarioError
+
+__all__ = ["Field", "Scenario", "ScenarioError", "list_scenarios", "load_scenario",
+           "packaged_names"]

@@ -1,0 +1,142 @@
+"""Scenario fields of the impactor terminal phase (seed 000 Table 2, seed 002; SPEC §3-5).
+
+File units follow the papers (km, km/s, urad, ug, %) and are converted to SI when the
+simulation is built; the field names carry the units.
+"""
+
+import math
+
+from .schema import Field, ScenarioError
+
+F = Field
+
+SCHEMA = {
+    "approach": {
+        "position_km": F("floats", [73440.0, 0.0, 0.0], length=3, units="km",
+                         doc="nominal initial position of the impactor relative to the target"),
+        "velocity_kmps": F("floats", [-10.2, 0.0, 0.0], length=3, units="km/s",
+                           doc="nominal relative velocity (defines the B-plane S axis)"),
+        "reference_normal": F("floats", [0.0, 0.0, 1.0], length=3,
+                              doc="normal h of the B-plane reference plane (T = S x h)"),
+    },
+    "spacecraft": {
+        "mass_kg": F("float", 372.0, lo=0.0, lo_open=True, hi=1e5, units="kg"),
+        "thrust_n": F("float", 88.0, lo=0.0, lo_open=True, hi=1e4, units="N"),
+        "isp_s": F("float", 230.0, lo=0.0, lo_open=True, hi=1e4, units="s",
+                   doc="specific impulse (hydrazine monopropellant class; not in the paper)"),
+    },
+    "dynamics": {
+        "mu_target_m3s2": F("float", 0.0, lo=0.0, hi=1e12, units="m^3/s^2",
+                            doc="target GM; 0 = no target gravity (paper: straight line)"),
+        "sun_distance_au": F("float", 0.0, lo=0.0, hi=100.0, units="AU",
+                             doc="target's heliocentric distance for the solar tide; 0 = off"),
+        "sun_direction": F("floats", [1.0, 0.0, 0.0], length=3,
+                           doc="direction from the target to the Sun"),
+    },
+    "camera": {
+        "focal_length_m": F("float", 2.103, lo=0.0, lo_open=True, hi=100.0, units="m"),
+        "image_interval_s": F("float", 15.0, lo=0.0, lo_open=True, hi=3600.0, units="s"),
+    },
+    "navigation": {
+        "knowledge_position_km": F("floats", [150.0, 8.0, 8.0], length=3, lo=0.0, units="km",
+                                   doc="1-sigma initial position knowledge along S, T, R"),
+        "knowledge_velocity_mps": F("float", 0.1, lo=0.0, hi=1e3, units="m/s",
+                                    doc="1-sigma initial velocity knowledge per axis"),
+        "process_noise_m2s3": F("float", 1e-18, lo=0.0, hi=1.0, units="m^2/s^3",
+                                doc="filter white-acceleration density (unmodelled forces)"),
+        "consider_attitude_bias": F("bool", True,
+                                    doc="add the attitude-bias rotation to the initial covariance"),
+    },
+    "errors": {
+        "delivery_position_km": F("float", 10.0, lo=0.0, hi=1e4, units="km",
+                                  doc="1-sigma initial position delivery error, per axis"),
+        "image_processing_urad": F("float", 10.0, lo=0.0, hi=1e5, units="urad"),
+        "attitude_control_urad": F("float", 320.0, lo=0.0, hi=1e5, units="urad",
+                                   doc="camera and thrust pointing error"),
+        "attitude_bias_urad": F("float", 100.0, lo=0.0, hi=1e5, units="urad",
+                                doc="attitude determination bias (constant per run)"),
+        "attitude_noise_urad": F("float", 30.0, lo=0.0, hi=1e5, units="urad",
+                                 doc="attitude determination random error (per image)"),
+        "accel_bias_ug": F("float", 50.0, lo=0.0, hi=1e6, units="ug"),
+        "accel_noise_ug": F("float", 10.0, lo=0.0, hi=1e6, units="ug"),
+        "burn_magnitude_pct": F("float", 2.0, lo=0.0, hi=50.0, units="%",
+                                doc="burn execution (thrust magnitude) error, drawn per firing"),
+    },
+    "guidance": {
+        "law": F("str", "los", choices=("los", "predictive"),
+                 doc="los: seed 000 switching curves; predictive: Deep Impact style"),
+        "dt_s": F("float", 1.0, lo=0.0, lo_open=True, hi=60.0, units="s",
+                  doc="control step; must divide the image interval"),
+        "aim_initial_km": F("floats", [0.0, 0.0], length=2, units="km",
+                            doc="aim point (B_T, B_R) before the retarget"),
+        "aim_final_km": F("floats", [1.0, 3.0], length=2, units="km",
+                          doc="aim point (B_T, B_R) after the retarget"),
+        "retarget_tgo_s": F("float", 750.0, lo=0.0, units="s",
+                            doc="nominal time to go at which the aim point changes"),
+        "cutoff_tgo_s": F("float", 60.0, lo=0.0, units="s",
+                          doc="no burn in the last cutoff_tgo_s before the nominal impact"),
+        "k1": F("float", 4.0, lo=0.0, lo_open=True, hi=100.0,
+                doc="los: miss tolerance rho_max = k1 sqrt(E^2+F^2)"),
+        "k2": F("float", 1.0, lo=0.0, lo_open=True, hi=100.0,
+                doc="los: shut-off rho_min = k2 sqrt(E^2+F^2); k2 <= k1"),
+        "temperature": F("float", 0.05, lo=0.0, lo_open=True, hi=10.0,
+                         doc="los: temperature of the relaxed switch (gradients only)"),
+        "burn_times_s": F("floats", [1200.0, 4100.0, 6450.0, 6780.0], lo=0.0, min_length=1,
+                          units="s", doc="predictive: mission times of the burns"),
+        "newton_iterations": F("int", 4, lo=1, hi=50, doc="predictive: Newton iterations"),
+        "tolerance_m": F("float", 0.1, lo=0.0, lo_open=True, hi=1e6, units="m",
+                         doc="predictive: predicted-miss tolerance of the Newton iteration"),
+        "predictor_steps": F("int", 4, lo=1, hi=10000,
+                             doc="predictive: RK4 steps per predictor segment"),
+    },
+}
+
+
+def time_of_flight_s(cfg: dict) -> float:
+    """Nominal time of flight to the B-plane (s) of the straight-line approach."""
+    r = cfg["approach"]["position_km"]
+    v = cfg["approach"]["velocity_kmps"]
+    vv = sum(x * x for x in v)
+    return -sum(a * b for a, b in zip(r, v)) / vv
+
+
+def check(cfg: dict) -> None:
+    """Cross-field checks of a validated impactor configuration."""
+    a, g, cam = cfg["approach"], cfg["guidance"], cfg["camera"]
+    v = a["velocity_kmps"]
+    if math.hypot(*v) == 0.0:
+        raise ScenarioError("approach.velocity_kmps: must be non-zero")
+    h = a["reference_normal"]
+    cross = [v[1] * h[2] - v[2] * h[1], v[2] * h[0] - v[0] * h[2], v[0] * h[1] - v[1] * h[0]]
+    if math.hypot(*cross) <= 1e-9 * math.hypot(*v) * max(math.hypot(*h), 1e-300):
+        raise ScenarioError(
+            "approach.reference_normal: parallel to the approach velocity (B-plane T axis "
+            "undefined); allowed: any vector not parallel to approach.velocity_kmps"
+        )
+    tof = time_of_flight_s(cfg)
+    if tof <= 0.0:
+        raise ScenarioError(
+            "approach.velocity_kmps: the impactor must approach the target "
+            "(position . velocity < 0)"
+        )
+    if g["k2"] > g["k1"]:
+        raise ScenarioError(f"guidance.k2: {g['k2']:g} > k1 = {g['k1']:g}; allowed: 0 < k2 <= k1")
+    ratio = cam["image_interval_s"] / g["dt_s"]
+    if abs(ratio - round(ratio)) > 1e-9:
+        raise ScenarioError(
+            f"guidance.dt_s: {g['dt_s']:g} s does not divide camera.image_interval_s = "
+            f"{cam['image_interval_s']:g} s; allowed: image_interval_s / n for a whole n"
+        )
+    if not g["cutoff_tgo_s"] < tof:
+        raise ScenarioError(f"guidance.cutoff_tgo_s: allowed: [0, {tof:g}) s (time of flight)")
+    if not g["retarget_tgo_s"] < tof:
+        raise ScenarioError(f"guidance.retarget_tgo_s: allowed: [0, {tof:g}) s")
+    bt = g["burn_times_s"]
+    t_cut = tof - g["cutoff_tgo_s"]
+    if any(b2 - b1 < cam["image_interval_s"] for b1, b2 in zip(bt, bt[1:])) or any(
+        b >= t_cut for b in bt
+    ):
+        raise ScenarioError(
+            f"guidance.burn_times_s: {bt}; allowed: increasing, at least one image interval "
+            f"({cam['image_interval_s']:g} s) apart, each before the cut-off at {t_cut:g} s"
+        )

@@ -1,0 +1,152 @@
+"""Load scenarios: packaged TOML files by name, or a user's TOML file by path."""
+
+import copy
+import dataclasses
+import importlib.resources
+import pathlib
+import tomllib
+from typing import Any
+
+from . import impactor
+from .schema import ScenarioError, parse_override, validate
+
+#: scenario kind -> module with ``SCHEMA`` and ``check(config)``
+KINDS = {"impactor": impactor}
+
+_META_FIELDS = {"name", "kind", "description", "reference", "runs", "seed"}
+
+
+@dataclasses.dataclass(frozen=True)
+class Scenario:
+    """A validated scenario.
+
+    Attributes:
+        name: scenario name; kind: which simulator runs it (``impactor``, ...).
+        description, reference: what it is and which paper/table it reproduces.
+        runs: the paper's number of Monte Carlo runs (what ``reproduce`` uses).
+        seed: default root seed.
+        config: ``{section: {field: value}}`` with every field of the kind's schema.
+        paper: the published results to compare with (``{metric: value}``).
+        source: where it was loaded from.
+    """
+
+    name: str
+    kind: str
+    description: str
+    reference: str
+    runs: int
+    seed: int
+    config: dict
+    paper: dict
+    source: str
+
+    def __getitem__(self, dotted: str) -> Any:
+        section, field = dotted.split(".")
+        return self.config[section][field]
+
+    def with_overrides(self, overrides) -> "Scenario":
+        """A copy with ``section.field=value`` overrides applied (strings or a mapping)."""
+        raw = copy.deepcopy(self.config)
+        items = overrides.items() if isinstance(overrides, dict) else overrides
+        for item in items:
+            if isinstance(item, str):
+                section, field, value = parse_override(item)
+            else:
+                key, value = item
+                if key.count(".") != 1:
+                    raise ScenarioError(f"{key}: the key must be section.field")
+                section, field = key.split(".")
+            raw.setdefault(section, {})[field] = value
+        return _build(self._meta(), raw, self.paper, self.source)
+
+    def _meta(self) -> dict:
+        return dict(name=self.name, kind=self.kind, description=self.description,
+                    reference=self.reference, runs=self.runs, seed=self.seed)
+
+    def to_dict(self) -> dict:
+        return {"scenario": self._meta(), **self.config, "paper": dict(self.paper)}
+
+    def to_toml(self) -> str:
+        import tomli_w
+
+        return tomli_w.dumps(self.to_dict())
+
+
+def _build(meta: dict, raw: dict, paper: dict, source: str) -> Scenario:
+    unknown = set(meta) - _META_FIELDS
+    if unknown:
+        raise ScenarioError(
+            f"scenario.{sorted(unknown)[0]}: unknown field; allowed: {', '.join(sorted(_META_FIELDS))}"
+        )
+    kind = meta.get("kind")
+    if kind not in KINDS:
+        raise ScenarioError(f"scenario.kind: {kind!r}; allowed: one of {', '.join(KINDS)}")
+    runs = meta.get("runs", 100)
+    if isinstance(runs, bool) or not isinstance(runs, int) or runs <= 0:
+        raise ScenarioError(f"scenario.runs: {runs!r}; allowed: an integer >= 1")
+    seed = meta.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ScenarioError(f"scenario.seed: {seed!r}; allowed: an integer >= 0")
+    for k, v in paper.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float, str)):
+            raise ScenarioError(f"paper.{k}: expected a number or text, got {v!r}")
+    module = KINDS[kind]
+    config = validate(raw, module.SCHEMA)
+    module.check(config)
+    return Scenario(
+        name=str(meta.get("name", "unnamed")),
+        kind=kind,
+        description=str(meta.get("description", "")),
+        reference=str(meta.get("reference", "")),
+        runs=runs,
+        seed=seed,
+        config=config,
+        paper=dict(paper),
+        source=source,
+    )
+
+
+def _files():
+    return importlib.resources.files("gnc_jax.scenario") / "files"
+
+
+def packaged_names() -> list[str]:
+    return sorted(p.name[:-5] for p in _files().iterdir() if p.name.endswith(".toml"))
+
+
+def load_scenario(name_or_path: str | pathlib.Path, overrides=()) -> Scenario:
+    """Load a packaged scenario by name (``gnc-jax list``) or a TOML file by path.
+
+    Args:
+        name_or_path: e.g. ``"deep-impact-los"`` or ``"my_case.toml"``.
+        overrides: ``["guidance.k1=3", ...]`` or ``{"guidance.k1": 3}``.
+
+    Raises:
+        ScenarioError: unknown scenario, unknown field, wrong type or out-of-range value.
+    """
+    text = str(name_or_path)
+    path = pathlib.Path(text)
+    if text.endswith(".toml") or path.exists():
+        if not path.is_file():
+            raise ScenarioError(f"scenario: no such file {text!r}")
+        data, source = path.read_bytes(), str(path)
+    else:
+        if text not in packaged_names():
+            raise ScenarioError(
+                f"scenario: unknown scenario {text!r}; allowed: {', '.join(packaged_names())} "
+                "or a path to a .toml file"
+            )
+        data, source = (_files() / f"{text}.toml").read_bytes(), f"packaged:{text}"
+    try:
+        raw = tomllib.loads(data.decode())
+    except tomllib.TOMLDecodeError as e:
+        raise ScenarioError(f"scenario {source}: not valid TOML ({e})") from None
+    meta = raw.pop("scenario", {})
+    paper = raw.pop("paper", {})
+    scenario = _build(meta, raw, paper, source)
+    return scenario.with_overrides(overrides) if overrides else scenario
+
+
+def list_scenarios() -> list[Scenario]:
+    """Every packaged scenario."""
+    return [load_scenario(n) for n in packaged_names()]

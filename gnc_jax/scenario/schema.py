@@ -1,0 +1,143 @@
+"""Typed, range-checked scenario fields.
+
+A scenario kind declares its fields once (name, type, default, allowed range, units, meaning);
+loading a TOML file or applying ``--set`` overrides validates against that declaration before
+anything is compiled, and every error is one line naming the field and what is allowed.
+"""
+
+import dataclasses
+import math
+from typing import Any
+
+
+class ScenarioError(ValueError):
+    """Invalid scenario input. The message is one line naming the field and the allowed values."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Field:
+    """Declaration of one scenario field.
+
+    Attributes:
+        kind: "float", "int", "bool", "str" or "floats" (a list of floats).
+        default: value used when the file does not set the field.
+        lo, hi: inclusive bounds for numbers (and for every element of "floats").
+        lo_open: the lower bound itself is excluded (e.g. a mass must be > 0).
+        length: required length of a "floats" list (None: any length >= min_length).
+        choices: allowed strings for "str".
+        units, doc: shown by ``gnc-jax list --fields`` and in error messages.
+    """
+
+    kind: str
+    default: Any
+    lo: float | None = None
+    hi: float | None = None
+    lo_open: bool = False
+    length: int | None = None
+    min_length: int = 0
+    choices: tuple[str, ...] | None = None
+    units: str = ""
+    doc: str = ""
+
+    def allowed(self) -> str:
+        if self.kind == "bool":
+            return "true or false"
+        if self.kind == "str":
+            return "one of " + ", ".join(repr(c) for c in self.choices or ())
+        lo = "-inf" if self.lo is None else f"{self.lo:g}"
+        hi = "inf" if self.hi is None else f"{self.hi:g}"
+        rng = f"{'(' if self.lo_open else '['}{lo}, {hi}]"
+        unit = f" {self.units}" if self.units else ""
+        if self.kind == "floats":
+            n = f"{self.length} numbers" if self.length else "a list of numbers"
+            return f"{n}, each in {rng}{unit}"
+        return f"{'an integer' if self.kind == 'int' else 'a number'} in {rng}{unit}"
+
+    def check(self, name: str, value: Any) -> Any:
+        """Return the validated (and normalised) value or raise :class:`ScenarioError`."""
+
+        def fail(why: str):
+            raise ScenarioError(f"{name}: {why}; allowed: {self.allowed()}")
+
+        def number(v, integer: bool):
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                fail(f"expected {'an integer' if integer else 'a number'}, got {v!r}")
+            if integer and not isinstance(v, int):
+                fail(f"expected an integer, got {v!r}")
+            if not math.isfinite(v):
+                fail(f"got {v!r}")
+            too_low = self.lo is not None and (v <= self.lo if self.lo_open else v < self.lo)
+            if too_low or (self.hi is not None and v > self.hi):
+                fail(f"{v!r} is out of range")
+            return int(v) if integer else float(v)
+
+        if self.kind == "float":
+            return number(value, False)
+        if self.kind == "int":
+            return number(value, True)
+        if self.kind == "bool":
+            if not isinstance(value, bool):
+                fail(f"expected true or false, got {value!r}")
+            return value
+        if self.kind == "str":
+            if not isinstance(value, str) or (self.choices and value not in self.choices):
+                fail(f"got {value!r}")
+            return value
+        if self.kind == "floats":
+            if not isinstance(value, (list, tuple)):
+                fail(f"expected a list, got {value!r}")
+            if self.length is not None and len(value) != self.length:
+                fail(f"expected {self.length} numbers, got {len(value)}")
+            if len(value) < self.min_length:
+                fail(f"expected at least {self.min_length} numbers, got {len(value)}")
+            return [number(v, False) for v in value]
+        raise AssertionError(self.kind)
+
+
+Schema = dict[str, dict[str, Field]]  # section -> field name -> Field
+
+
+def validate(config: dict, schema: Schema, where: str = "") -> dict:
+    """Fill defaults and check every field of ``config`` against ``schema``.
+
+    Returns a new nested dict ``{section: {field: value}}`` holding every declared field.
+    """
+    out: dict[str, dict[str, Any]] = {}
+    for section, value in config.items():
+        if section not in schema:
+            raise ScenarioError(
+                f"{where}{section}: unknown section; allowed: {', '.join(sorted(schema))}"
+            )
+        if not isinstance(value, dict):
+            raise ScenarioError(f"{where}{section}: expected a table of fields, got {value!r}")
+        for name in value:
+            if name not in schema[section]:
+                raise ScenarioError(
+                    f"{where}{section}.{name}: unknown field; allowed in [{section}]: "
+                    + ", ".join(sorted(schema[section]))
+                )
+    for section, fields in schema.items():
+        given = config.get(section, {})
+        out[section] = {
+            name: field.check(f"{where}{section}.{name}", given.get(name, field.default))
+            for name, field in fields.items()
+        }
+    return out
+
+
+def parse_override(text: str) -> tuple[str, str, Any]:
+    """Parse ``section.field=value`` (value in TOML syntax; a bare word is a string)."""
+    import tomllib
+
+    if "=" not in text:
+        raise ScenarioError(f"--set {text}: expected section.field=value")
+    key, raw = text.split("=", 1)
+    key = key.strip()
+    if key.count(".") != 1:
+        raise ScenarioError(f"--set {text}: the key must be section.field, e.g. guidance.k1=4")
+    section, name = key.split(".")
+    try:
+        value = tomllib.loads(f"v = {raw.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw.strip()
+    return section, name, value

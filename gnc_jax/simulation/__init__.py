@@ -1,0 +1,13 @@
+"""Closed-loop simulators, one module per system, each written for a single trajectory."""
+
+from . import impactor
+from .impactor import (
+    ImpactorErrors,
+    ImpactorOutcome,
+    ImpactorSimulation,
+    StepRecord,
+    simulate as simulate_impactor,
+)
+
+__all__ = ["impactor", "ImpactorErrors", "ImpactorOutcome", "ImpactorSimulation", "StepRecord",
+           "simulate_impactor"]
