@@ -1,3 +1,29 @@
-"""gnc_jax: JAX-vectorised batch simulator for spacecraft GNC."""
-from . import _config  # noqa: F401  (float64, host devices)
+"""gnc_jax: JAX-vectorised batch simulator for spacecraft guidance, navigation and control.
 
+Typical use::
+
+    import gnc_jax as gj
+    scenario = gj.load_scenario("deep-impact-los", overrides=["guidance.k1=3"])
+    study = gj.run_study(scenario, runs=2000, seed=0)
+    print(study.summary()["miss_rms_m"])
+    study.save("results/los")
+    gj.report("results/los")
+
+Importing gnc_jax turns on float64 and splits the CPU into one XLA device per core
+(``GNC_JAX_HOST_DEVICES`` overrides the count); import it before anything touches JAX.
+"""
+
+from . import _config  # noqa: F401  (float64, host devices: must run before jax is used)
+from ._status import Status
+from .montecarlo import Study, run_key, run_study, simulate_one
+from .reproduction import reproduce
+from .report import report
+from .results import load_results
+from .scenario import Scenario, ScenarioError, list_scenarios, load_scenario
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Status", "Study", "run_key", "run_study", "simulate_one", "reproduce", "report",
+    "load_results", "Scenario", "ScenarioError", "list_scenarios", "load_scenario",
+]

@@ -128,7 +128,10 @@ def load_scenario(name_or_path: str | pathlib.Path, overrides=()) -> Scenario:
     path = pathlib.Path(text)
     if text.endswith(".toml") or path.exists():
         if not path.is_file():
-            raise ScenarioError(f"scenario: no such file {text!r}")
+            raise ScenarioError(
+                f"scenario: no such file {text!r}; allowed: a packaged name "
+                f"({', '.join(packaged_names())}) or an existing .toml file"
+            )
         data, source = path.read_bytes(), str(path)
     else:
         if text not in packaged_names():

@@ -127,6 +127,13 @@ class _Carry(NamedTuple):
 _DELIVERY, _KNOW_POS, _KNOW_VEL, _ATT_BIAS, _ACC_BIAS, _IMAGES, _STEPS = range(7)
 
 
+def _safe_norm(x):
+    """|x| with a zero (not NaN) gradient at x = 0: coasting steps have zero Δv."""
+    n2 = jnp.dot(x, x)
+    ok = n2 > 0.0
+    return jnp.where(ok, jnp.sqrt(jnp.where(ok, n2, 1.0)), 0.0)
+
+
 def _normal(key, stream, shape=(3,)):
     return jax.random.normal(jax.random.fold_in(key, stream), shape)
 
@@ -224,7 +231,7 @@ def simulate(
             law_state=law_state,
             throttle_prev=throttle,
             execution_error=execution_error,
-            dv_mps=carry.dv_mps + jnp.linalg.norm(dv_true),
+            dv_mps=carry.dv_mps + _safe_norm(dv_true),
             firings=carry.firings + ignition.astype(carry.firings.dtype),
             burn_time_s=carry.burn_time_s + throttle * dt,
             burn_time_image_s=carry.burn_time_image_s + throttle * dt,

@@ -1,0 +1,165 @@
+"""Command line: ``gnc-jax list | run | reproduce | report``.
+
+Every command is one or two calls of the Python API (``gnc_jax.load_scenario``,
+``gnc_jax.run_study``, ``Study.save``, ``gnc_jax.reproduce``, ``gnc_jax.report``). Bad input
+stops before anything is compiled, with one line naming the field and the allowed values.
+"""
+
+import argparse
+import sys
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line instead of usage + message
+        self.exit(2, f"gnc-jax: error: {message} (see gnc-jax {self.prog.split()[-1]} --help)\n")
+
+
+def _positive_int(name):
+    def parse(text):
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"{name}: {text!r} is not an integer; allowed: an integer >= 1") from None
+        if value <= 0:
+            raise argparse.ArgumentTypeError(f"{name}: {value}; allowed: an integer >= 1")
+        return value
+
+    return parse
+
+
+def _seed(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--seed: {text!r}; allowed: an integer in [0, 2^32)")
+    if not 0 <= value < 2**32:
+        raise argparse.ArgumentTypeError(f"--seed: {value}; allowed: an integer in [0, 2^32)")
+    return value
+
+
+def _print_summary(summary: dict) -> None:
+    skip = {"paper", "firings_histogram", "failed_by_status", "description"}
+    width = max(len(k) for k in summary)
+    for key, value in summary.items():
+        if key in skip:
+            continue
+        text = f"{value:.4g}" if isinstance(value, float) else str(value)
+        print(f"  {key:<{width}}  {text}")
+    if summary.get("failed_by_status"):
+        print(f"  {'failed_by_status':<{width}}  {summary['failed_by_status']}")
+    if summary.get("firings_histogram"):
+        print(f"  {'firings_histogram':<{width}}  {summary['firings_histogram']}")
+    from .reproduction import comparison_rows
+
+    rows = comparison_rows(summary)
+    if rows:
+        print("  paper vs gnc_jax:")
+        for metric, paper, ours in rows:
+            print(f"    {metric:<16} {paper:>10} {ours:>10}")
+
+
+def cmd_list(args) -> int:
+    from .scenario import list_scenarios
+    from .scenario.loader import KINDS
+
+    if args.fields:
+        for kind, module in KINDS.items():
+            print(f"[{kind}]")
+            for section, fields in module.SCHEMA.items():
+                for name, f in fields.items():
+                    print(f"  {section}.{name} = {f.default!r}   # {f.allowed()}"
+                          + (f"; {f.doc}" if f.doc else ""))
+        return 0
+    scenarios = list_scenarios()
+    width = max(len(s.name) for s in scenarios)
+    print(f"{'scenario':<{width}}  {'kind':<9} {'runs':>5}  description")
+    for s in scenarios:
+        print(f"{s.name:<{width}}  {s.kind:<9} {s.runs:>5}  {s.description}")
+    return 0
+
+
+def cmd_run(args) -> int:
+    from .montecarlo import run_study
+    from .scenario import load_scenario
+
+    scenario = load_scenario(args.scenario, overrides=args.set or ())
+    study = run_study(scenario, runs=args.runs, seed=args.seed, chunk_size=args.chunk_size,
+                      progress=False if args.no_progress else None)
+    summary = study.summary()
+    print(f"{scenario.name}: {study.runs} runs, compile {study.compile_s:.1f} s, "
+          f"study {study.wall_s:.2f} s on {study.n_devices} devices")
+    _print_summary(summary)
+    if args.out:
+        paths = study.save(args.out)
+        print("wrote " + ", ".join(paths.values()))
+    return 0
+
+
+def cmd_reproduce(args) -> int:
+    from .reproduction import reproduce
+
+    reproduce(args.out, runs=args.runs, only=args.only,
+              progress=False if args.no_progress else None)
+    print(f"wrote {args.out}/reproduce.md")
+    return 0
+
+
+def cmd_report(args) -> int:
+    from .report import report
+
+    for path in report(args.dir, args.out):
+        print(f"wrote {path}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="gnc-jax", description=__doc__.splitlines()[0])
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    q = sub.add_parser("list", help="list the packaged scenarios")
+    q.add_argument("--fields", action="store_true", help="list every scenario field instead")
+    q.set_defaults(func=cmd_list)
+
+    q = sub.add_parser("run", help="run a Monte Carlo study of one scenario")
+    q.add_argument("scenario", help="packaged scenario name (gnc-jax list) or a .toml path")
+    q.add_argument("--runs", type=_positive_int("--runs"), default=None,
+                   help="number of runs (default: the paper's)")
+    q.add_argument("--seed", type=_seed, default=None, help="root seed (default: scenario's)")
+    q.add_argument("--out", default=None, help="directory for summary.json, runs.parquet, TOML")
+    q.add_argument("--set", action="append", metavar="SECTION.FIELD=VALUE",
+                   help="override a scenario field (repeatable), e.g. --set guidance.k1=3")
+    q.add_argument("--chunk-size", type=_positive_int("--chunk-size"), default=None,
+                   help="runs per compiled call (results do not depend on it)")
+    q.add_argument("--no-progress", action="store_true", help="no progress bar")
+    q.set_defaults(func=cmd_run)
+
+    q = sub.add_parser("reproduce", help="every paper scenario, paper vs gnc_jax")
+    q.add_argument("--out", required=True, help="output directory")
+    q.add_argument("--runs", type=_positive_int("--runs"), default=None,
+                   help="override every scenario's run count (quick check)")
+    q.add_argument("--only", nargs="+", default=None, help="only these scenarios")
+    q.add_argument("--no-progress", action="store_true")
+    q.set_defaults(func=cmd_reproduce)
+
+    q = sub.add_parser("report", help="PNG figures of a study directory")
+    q.add_argument("dir", help="directory written by gnc-jax run --out")
+    q.add_argument("--out", default=None, help="where to write the PNGs (default: DIR)")
+    q.set_defaults(func=cmd_report)
+    return p
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    import gnc_jax  # noqa: F401  (float64 and host devices before JAX starts)
+    from .scenario import ScenarioError
+
+    try:
+        return args.func(args)
+    except (ScenarioError, FileNotFoundError) as e:
+        print(f"gnc-jax: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,167 @@
+"""Impactor guidance laws: switching curves, hysteresis, thrust direction, predictive burns."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from gnc_jax.dynamics.impactor import Engine, ImpactorState, RelativeDynamics, coast_to_b_plane, propagate
+from gnc_jax.geometry import b_plane_frame, los_rate, range_rate, unforced_miss
+from gnc_jax.guidance import (
+    ImpactorGuidanceContext,
+    LOSGuidanceState,
+    LOSSwitchingCurveGuidance,
+    PredictiveGuidance,
+    switching_curve,
+)
+from gnc_jax.navigation import NavEstimate
+
+
+def context(**kw):
+    c = b_plane_frame(jnp.array([-1.0, 0.0, 0.0]), jnp.array([0.0, 0.0, 1.0]))
+    base = dict(
+        c_bi=c, aim_initial_m=jnp.zeros(2), aim_final_m=jnp.array([1e3, 3e3]),
+        retarget_time_s=jnp.asarray(6450.0), cutoff_time_s=jnp.asarray(7140.0),
+        engine=Engine(jnp.asarray(88.0), jnp.asarray(230.0)), mass_kg=jnp.asarray(372.0),
+        dynamics=RelativeDynamics(jnp.asarray(0.0), jnp.asarray(0.0), jnp.array([1.0, 0, 0])),
+        dt_s=1.0, image_interval_s=15.0,
+    )
+    base.update(kw)
+    return ImpactorGuidanceContext(**base)
+
+
+def nav_at(r, v, p=None):
+    return NavEstimate(jnp.concatenate([jnp.asarray(r), jnp.asarray(v)]),
+                       jnp.eye(6) * 1e4 if p is None else p)
+
+
+def test_switching_curve_is_the_los_rate_of_the_tolerated_miss():
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        rho = np.array([rng.uniform(1e5, 7e7), 0.0, 0.0])
+        rho_limit = rng.uniform(10.0, 1e4)
+        rdot = -rng.uniform(1e3, 2e4)
+        w = float(switching_curve(rho[0], rdot, rho_limit))
+        # a geometry with exactly that LOS rate has unforced miss rho_limit (eq. 7 inverted)
+        rho_dot = np.array([rdot, w * rho[0], 0.0])
+        assert float(unforced_miss(jnp.asarray(rho), jnp.asarray(rho_dot))) == pytest.approx(
+            rho_limit, rel=1e-9)
+    assert np.isinf(float(switching_curve(100.0, -1e4, 200.0)))
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_thrust_direction_reduces_los_rate(seed):
+    rng = np.random.default_rng(seed)
+    ctx = context(retarget_time_s=jnp.asarray(1e9))
+    r = np.array([rng.uniform(1e6, 7e7), rng.normal() * 1e4, rng.normal() * 1e4])
+    v = np.array([-1.02e4, rng.normal() * 0.5, rng.normal() * 0.5])
+    law = LOSSwitchingCurveGuidance()
+    state = LOSGuidanceState(*(jnp.zeros(()) for _ in range(5)))._replace(sigma_b_m=jnp.asarray(1.0))
+    cmd, _ = law.step(state, nav_at(r, v), 0.0, ctx)
+    n = np.asarray(cmd.direction)
+    assert float(cmd.throttle) == 1.0  # 1 m sigma: any sizeable miss opens the engine
+    omega = lambda vv: np.linalg.norm(np.asarray(los_rate(jnp.asarray(-r), jnp.asarray(-vv))))
+    dv = 0.05
+    assert omega(v + dv * n) < omega(v)
+    assert omega(v - dv * n) > omega(v)  # the opposite sign (eq. 19 as printed) increases it
+    assert abs(n @ v) < 1e-9 * np.linalg.norm(v)  # perpendicular to the relative velocity
+
+
+def test_hysteresis_logic():
+    ctx = context(retarget_time_s=jnp.asarray(1e9))
+    law = LOSSwitchingCurveGuidance(k1=jnp.asarray(4.0), k2=jnp.asarray(1.0))
+    r = np.array([5e7, 0.0, 0.0])
+    sigma = 100.0
+    rdot = -1.02e4
+    w_open = float(switching_curve(5e7, rdot, 400.0))
+    w_close = float(switching_curve(5e7, rdot, 100.0))
+
+    def run(omega, prev):
+        v = np.array([rdot, -omega * 5e7, 0.0])  # rho = -r, rho_dot = -v
+        st = LOSGuidanceState(jnp.asarray(prev), jnp.asarray(sigma), *(jnp.zeros(()),) * 3)
+        cmd, new = law.step(st, nav_at(r, v), 0.0, ctx)
+        return float(cmd.throttle)
+
+    mid = 0.5 * (w_open + w_close)
+    assert run(1.01 * w_open, 0.0) == 1.0
+    assert run(mid, 0.0) == 0.0
+    assert run(mid, 1.0) == 1.0
+    assert run(0.99 * w_close, 1.0) == 0.0
+    # no burn after the cut-off time
+    st = LOSGuidanceState(jnp.asarray(0.0), jnp.asarray(sigma), *(jnp.zeros(()),) * 3)
+    cmd, _ = law.step(st, nav_at(r, np.array([rdot, -2 * w_open * 5e7, 0])), 7200.0, ctx)
+    assert float(cmd.throttle) == 0.0
+
+
+def test_relaxed_switch_tends_to_the_hard_logic():
+    ctx = context(retarget_time_s=jnp.asarray(1e9))
+    r = np.array([5e7, 0.0, 0.0])
+    w_open = float(switching_curve(5e7, -1.02e4, 400.0))
+    for omega, prev, expected in ((1.2 * w_open, 0.0, 1.0), (0.8 * w_open, 0.0, 0.0),
+                                  (0.8 * w_open, 1.0, 1.0), (0.1 * w_open, 1.0, 0.0)):
+        v = np.array([-1.02e4, -omega * 5e7, 0.0])
+        st = LOSGuidanceState(jnp.asarray(prev), jnp.asarray(100.0), *(jnp.zeros(()),) * 3)
+        law = LOSSwitchingCurveGuidance(temperature=jnp.asarray(1e-3), relaxed=True)
+        cmd, _ = law.step(st, nav_at(r, v), 0.0, ctx)
+        assert float(cmd.throttle) == pytest.approx(expected, abs=1e-6)
+
+
+def test_los_plan_uses_the_mapped_covariance():
+    ctx = context()
+    p = jnp.diag(jnp.array([1e10, 4e6, 9e6, 1e-2, 1e-2, 1e-2]))
+    r, v = np.array([7.344e7, 0, 0]), np.array([-1.02e4, 0, 0])
+    st = LOSSwitchingCurveGuidance().init(nav_at(r, v, p), ctx)
+    t_go = 7200.0
+    expected = np.sqrt(4e6 + 9e6 + 2 * t_go**2 * 1e-2)
+    assert float(st.sigma_b_m) == pytest.approx(expected, rel=1e-9)
+
+
+def test_predictive_burn_nulls_the_predicted_miss():
+    ctx = context()
+    law = PredictiveGuidance(burn_times_s=jnp.array([1200.0]))
+    r = np.array([7.344e7 - 1.02e4 * 1195.0, 4e3, -7e3])
+    v = np.array([-1.02e4, 0.3, -0.1])
+    nav = nav_at(r, v)
+    state = law.plan(law.init(nav, ctx), nav, 1195.0, ctx)
+    assert float(state.burn_start_s) == 1200.0
+    assert float(state.predicted_miss_m) == pytest.approx(np.hypot(*np.asarray(
+        coast_to_b_plane(ctx.dynamics, ImpactorState(jnp.asarray(r), jnp.asarray(v), 372.0),
+                         ctx.c_bi, 1)[0])), rel=1e-6)
+    # Execute the commanded finite burn exactly and coast: the B-plane point is the aim point.
+    y = ImpactorState(jnp.asarray(r), jnp.asarray(v), jnp.asarray(372.0))
+    y = propagate(ctx.dynamics, y, jnp.zeros(3), 0.0, 5.0, 1)
+    thrust = ctx.engine.thrust_n * state.burn_direction
+    y = propagate(ctx.dynamics, y, thrust, ctx.engine.mass_flow(1.0), state.burn_duration_s, 200)
+    b, _ = coast_to_b_plane(ctx.dynamics, y, ctx.c_bi, 1)
+    assert np.linalg.norm(np.asarray(b)) < 1.0  # aim (0, 0) before the retarget; mass flow ~cm
+    t_go = 7.344e7 / 1.02e4 - 1200.0  # impulsive straight-line estimate: |miss| / t_go
+    assert float(state.burn_dv_mps) == pytest.approx(float(state.predicted_miss_m) / t_go, rel=0.01)
+
+
+def test_predictive_throttle_covers_the_burn_exactly():
+    ctx = context()
+    law = PredictiveGuidance()
+    st = law.init(None, ctx)._replace(burn_start_s=jnp.asarray(10.3), burn_duration_s=jnp.asarray(2.5))
+    total = 0.0
+    for k in range(20):
+        cmd, st = law.step(st, None, float(k), ctx)
+        total += float(cmd.throttle) * ctx.dt_s
+    assert total == pytest.approx(2.5, abs=1e-12)
+
+
+def test_laws_are_differentiable_in_their_gains():
+    ctx = context(retarget_time_s=jnp.asarray(1e9))
+    w_open = float(switching_curve(5e7, -1.02e4, 400.0))
+    r, v = np.array([5e7, 0.0, 0.0]), np.array([-1.02e4, -1.02 * w_open * 5e7, 0.0])
+    st = LOSGuidanceState(jnp.asarray(0.3), jnp.asarray(100.0), *(jnp.zeros(()),) * 3)
+
+    def throttle(k1):
+        law = LOSSwitchingCurveGuidance(k1=k1, temperature=jnp.asarray(0.05), relaxed=True)
+        return law.step(st, nav_at(r, v), 0.0, ctx)[0].throttle
+
+    g = jax.grad(throttle)(jnp.asarray(4.0))
+    h = 1e-5
+    fd = (throttle(jnp.asarray(4.0 + h)) - throttle(jnp.asarray(4.0 - h))) / (2 * h)
+    assert float(g) == pytest.approx(float(fd), rel=1e-6)
+    assert float(g) < 0.0  # a larger tolerance opens the engine less
+    assert float(range_rate(jnp.asarray(-r), jnp.asarray(-v))) < 0

@@ -1,0 +1,144 @@
+"""Scenario validation, CLI commands, results files and reports."""
+
+import json
+import pathlib
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+import gnc_jax as gj
+from gnc_jax import cli, montecarlo
+from gnc_jax.scenario import ScenarioError
+
+SHORT = [
+    "approach.position_km=[10200.0, 0.0, 0.0]",
+    "errors.delivery_position_km=1.0",
+    "navigation.knowledge_position_km=[20.0, 1.0, 1.0]",
+    "guidance.retarget_tgo_s=300.0",
+    "guidance.burn_times_s=[150.0, 600.0, 700.0, 900.0]",
+]
+
+BAD_INPUT = [
+    (["run", "no-such-scenario"], "scenario: unknown scenario 'no-such-scenario'"),
+    (["run", "deep-impact-los", "--set", "guidance.kk1=3"], "guidance.kk1: unknown field"),
+    (["run", "deep-impact-los", "--set", "warp.speed=3"], "warp: unknown section"),
+    (["run", "deep-impact-los", "--set", "guidance.k1=\"four\""], "guidance.k1: expected a number"),
+    (["run", "deep-impact-los", "--set", "guidance.law=pn"], "guidance.law: got 'pn'"),
+    (["run", "deep-impact-los", "--set", "spacecraft.mass_kg=-372"], "spacecraft.mass_kg: -372"),
+    (["run", "deep-impact-los", "--set", "spacecraft.thrust_n=0"], "spacecraft.thrust_n: 0"),
+    (["run", "deep-impact-los", "--set", "guidance.k2=5"], "guidance.k2: 5 > k1 = 4"),
+    (["run", "deep-impact-los", "--set", "guidance.dt_s=7"], "guidance.dt_s: 7 s does not divide"),
+    (["run", "deep-impact-los", "--set", "approach.reference_normal=[1.0,0.0,0.0]"],
+     "approach.reference_normal: parallel"),
+    (["run", "deep-impact-los", "--runs", "0"], "--runs: 0; allowed: an integer >= 1"),
+    (["run", "deep-impact-los", "--runs", "-5"], "--runs: -5; allowed"),
+    (["run", "deep-impact-los", "--seed", "x"], "--seed: 'x'"),
+    (["run", "missing.toml"], "scenario: no such file 'missing.toml'"),
+]
+
+
+@pytest.mark.parametrize("argv,message", BAD_INPUT)
+def test_bad_input_is_one_clear_line_before_compilation(argv, message, capsys, monkeypatch):
+    def no_compile(*a, **k):
+        raise AssertionError("compiled despite bad input")
+
+    monkeypatch.setattr(montecarlo, "_compile", no_compile)
+    with pytest.raises(SystemExit) if argv[-2] in ("--runs", "--seed") else _returns(2):
+        code = cli.main(argv)
+        if code:
+            raise SystemExit(code)
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert err.startswith("gnc-jax: error: ")
+    assert message in err
+    assert "allowed" in err
+
+
+class _returns:
+    def __init__(self, code):
+        self.code = code
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, tp, value, tb):
+        assert tp is SystemExit and value.code == self.code
+        return True
+
+
+def test_api_errors_name_the_field():
+    sc = gj.load_scenario("deep-impact-los")
+    with pytest.raises(ScenarioError, match=r"^runs: 0; allowed"):
+        gj.run_study(sc, runs=0)
+    with pytest.raises(ScenarioError, match=r"^seed: -1"):
+        gj.run_study(sc, runs=1, seed=-1)
+    with pytest.raises(ScenarioError, match=r"guidance.burn_times_s"):
+        sc.with_overrides({"guidance.burn_times_s": [1200.0, 1205.0]})
+
+
+def test_user_toml_and_resolved_round_trip(tmp_path):
+    sc = gj.load_scenario("deep-impact-predictive", overrides=["guidance.tolerance_m=0.5"])
+    path = tmp_path / "mine.toml"
+    path.write_text(sc.to_toml())
+    again = gj.load_scenario(path)
+    assert again.config == sc.config
+    assert again.paper == sc.paper and again.runs == sc.runs
+    assert again["guidance.tolerance_m"] == 0.5
+    # defaults fill fields a user file leaves out
+    small = tmp_path / "small.toml"
+    small.write_text('[scenario]\nname = "x"\nkind = "impactor"\n[guidance]\nk1 = 3.0\n')
+    s2 = gj.load_scenario(small)
+    assert s2["guidance.k1"] == 3.0 and s2["spacecraft.thrust_n"] == 88.0
+
+
+def test_list(capsys):
+    assert cli.main(["list"]) == 0
+    out = capsys.readouterr().out
+    assert "deep-impact-los" in out and "deep-impact-predictive" in out
+    assert cli.main(["list", "--fields"]) == 0
+    assert "guidance.k1 = 4.0" in capsys.readouterr().out
+
+
+def test_run_writes_results_and_report(tmp_path, capsys):
+    out = tmp_path / "los"
+    argv = ["run", "deep-impact-los", "--runs", "6", "--seed", "2", "--out", str(out),
+            "--no-progress"] + [x for s in SHORT for x in ("--set", s)]
+    assert cli.main(argv) == 0
+    printed = capsys.readouterr().out
+    assert "miss_rms_m" in printed and "paper vs gnc_jax" in printed
+    summary = json.loads((out / "summary.json").read_text())
+    for key in ("scenario", "runs", "failed", "seed", "wall_s", "compile_s", "miss_rms_m",
+                "miss_mean_m", "miss_max_m", "dv_mean_mps", "dv_max_mps", "firings_max",
+                "firings_mode"):
+        assert key in summary, key
+    table = pq.read_table(out / "runs.parquet")
+    assert table.num_rows == 6
+    miss = table.column("miss_m").to_numpy()
+    assert summary["miss_rms_m"] == pytest.approx(np.sqrt(np.mean(miss**2)))
+    assert set(table.column("status_name").to_pylist()) == {"ok"}
+    assert "delivery_error_m_0" in table.column_names
+    resolved = gj.load_scenario(out / "scenario.toml")
+    assert resolved["approach.position_km"] == [10200.0, 0.0, 0.0]
+
+    assert cli.main(["report", str(out)]) == 0
+    for name in ("b_plane.png", "dv_firings.png", "engine_trace.png"):
+        png = out / name
+        assert png.is_file() and png.read_bytes()[:4] == b"\x89PNG" and png.stat().st_size > 10_000
+
+
+def test_report_of_missing_dir_is_an_error(tmp_path, capsys):
+    assert cli.main(["report", str(tmp_path / "nothing")]) == 2
+    assert "summary.json: missing" in capsys.readouterr().err
+
+
+def test_reproduce_side_by_side(tmp_path, capsys, monkeypatch):
+    short = {name: gj.load_scenario(name, overrides=SHORT)
+             for name in ("deep-impact-los", "deep-impact-predictive")}
+    monkeypatch.setattr("gnc_jax.reproduction.list_scenarios", lambda: list(short.values()))
+    assert cli.main(["reproduce", "--out", str(tmp_path), "--runs", "4", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "miss RMS (m)" in out and "148.8" in out and "90.1" in out
+    md = (tmp_path / "reproduce.md").read_text()
+    assert "| `deep-impact-los` | 4 | miss RMS (m) | 90.1 |" in md
+    assert pathlib.Path(tmp_path / "deep-impact-predictive" / "summary.json").is_file()
