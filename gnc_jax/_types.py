@@ -8,5 +8,15 @@ Matrix3 = Float[Array, "3 3"]
 State6 = Float[Array, "6"]
 Covariance6 = Float[Array, "6 6"]
 
-__all__ = ["Array", "Bool", "Float", "Int", "PRNGKeyArray", "Scalar", "Vector3", "Matrix3",
-           "State6", "Covariance6"]
+__all__ = [
+    "Array",
+    "Bool",
+    "Float",
+    "Int",
+    "PRNGKeyArray",
+    "Scalar",
+    "Vector3",
+    "Matrix3",
+    "State6",
+    "Covariance6",
+]

@@ -20,7 +20,8 @@ def _positive_int(name):
             value = int(text)
         except ValueError:
             raise argparse.ArgumentTypeError(
-                f"{name}: {text!r} is not an integer; allowed: an integer >= 1") from None
+                f"{name}: {text!r} is not an integer; allowed: an integer >= 1"
+            ) from None
         if value <= 0:
             raise argparse.ArgumentTypeError(f"{name}: {value}; allowed: an integer >= 1")
         return value
@@ -32,7 +33,9 @@ def _seed(text):
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"--seed: {text!r}; allowed: an integer in [0, 2^32)")
+        raise argparse.ArgumentTypeError(
+            f"--seed: {text!r}; allowed: an integer in [0, 2^32)"
+        ) from None
     if not 0 <= value < 2**32:
         raise argparse.ArgumentTypeError(f"--seed: {value}; allowed: an integer in [0, 2^32)")
     return value
@@ -68,8 +71,10 @@ def cmd_list(args) -> int:
             print(f"[{kind}]")
             for section, fields in module.SCHEMA.items():
                 for name, f in fields.items():
-                    print(f"  {section}.{name} = {f.default!r}   # {f.allowed()}"
-                          + (f"; {f.doc}" if f.doc else ""))
+                    print(
+                        f"  {section}.{name} = {f.default!r}   # {f.allowed()}"
+                        + (f"; {f.doc}" if f.doc else "")
+                    )
         return 0
     scenarios = list_scenarios()
     width = max(len(s.name) for s in scenarios)
@@ -84,11 +89,18 @@ def cmd_run(args) -> int:
     from .scenario import load_scenario
 
     scenario = load_scenario(args.scenario, overrides=args.set or ())
-    study = run_study(scenario, runs=args.runs, seed=args.seed, chunk_size=args.chunk_size,
-                      progress=False if args.no_progress else None)
+    study = run_study(
+        scenario,
+        runs=args.runs,
+        seed=args.seed,
+        chunk_size=args.chunk_size,
+        progress=False if args.no_progress else None,
+    )
     summary = study.summary()
-    print(f"{scenario.name}: {study.runs} runs, compile {study.compile_s:.1f} s, "
-          f"study {study.wall_s:.2f} s on {study.n_devices} devices")
+    print(
+        f"{scenario.name}: {study.runs} runs, compile {study.compile_s:.1f} s, "
+        f"study {study.wall_s:.2f} s on {study.n_devices} devices"
+    )
     _print_summary(summary)
     if args.out:
         paths = study.save(args.out)
@@ -99,8 +111,9 @@ def cmd_run(args) -> int:
 def cmd_reproduce(args) -> int:
     from .reproduction import reproduce
 
-    reproduce(args.out, runs=args.runs, only=args.only,
-              progress=False if args.no_progress else None)
+    reproduce(
+        args.out, runs=args.runs, only=args.only, progress=False if args.no_progress else None
+    )
     print(f"wrote {args.out}/reproduce.md")
     return 0
 
@@ -123,21 +136,37 @@ def build_parser() -> argparse.ArgumentParser:
 
     q = sub.add_parser("run", help="run a Monte Carlo study of one scenario")
     q.add_argument("scenario", help="packaged scenario name (gnc-jax list) or a .toml path")
-    q.add_argument("--runs", type=_positive_int("--runs"), default=None,
-                   help="number of runs (default: the paper's)")
+    q.add_argument(
+        "--runs",
+        type=_positive_int("--runs"),
+        default=None,
+        help="number of runs (default: the paper's)",
+    )
     q.add_argument("--seed", type=_seed, default=None, help="root seed (default: scenario's)")
     q.add_argument("--out", default=None, help="directory for summary.json, runs.parquet, TOML")
-    q.add_argument("--set", action="append", metavar="SECTION.FIELD=VALUE",
-                   help="override a scenario field (repeatable), e.g. --set guidance.k1=3")
-    q.add_argument("--chunk-size", type=_positive_int("--chunk-size"), default=None,
-                   help="runs per compiled call (results do not depend on it)")
+    q.add_argument(
+        "--set",
+        action="append",
+        metavar="SECTION.FIELD=VALUE",
+        help="override a scenario field (repeatable), e.g. --set guidance.k1=3",
+    )
+    q.add_argument(
+        "--chunk-size",
+        type=_positive_int("--chunk-size"),
+        default=None,
+        help="runs per compiled call (results do not depend on it)",
+    )
     q.add_argument("--no-progress", action="store_true", help="no progress bar")
     q.set_defaults(func=cmd_run)
 
     q = sub.add_parser("reproduce", help="every paper scenario, paper vs gnc_jax")
     q.add_argument("--out", required=True, help="output directory")
-    q.add_argument("--runs", type=_positive_int("--runs"), default=None,
-                   help="override every scenario's run count (quick check)")
+    q.add_argument(
+        "--runs",
+        type=_positive_int("--runs"),
+        default=None,
+        help="override every scenario's run count (quick check)",
+    )
     q.add_argument("--only", nargs="+", default=None, help="only these scenarios")
     q.add_argument("--no-progress", action="store_true")
     q.set_defaults(func=cmd_reproduce)
@@ -152,6 +181,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     import gnc_jax  # noqa: F401  (float64 and host devices before JAX starts)
+
     from .scenario import ScenarioError
 
     try:

@@ -75,8 +75,7 @@ def _compile(system, fn, n_dev, sim, law, seed_arr, chunk):
     Gains and scenario values are arguments, so a new value does not recompile.
     """
     leaves, treedef = jax.tree_util.tree_flatten((sim, law))
-    key = (system, n_dev, chunk, treedef,
-           tuple((jnp.shape(x), jnp.result_type(x)) for x in leaves))
+    key = (system, n_dev, chunk, treedef, tuple((jnp.shape(x), jnp.result_type(x)) for x in leaves))
     if key in _COMPILED:
         return _COMPILED[key], 0.0
     t0 = time.perf_counter()
@@ -129,11 +128,12 @@ class Study:
 def _nan_to_status(outcomes: dict[str, np.ndarray]) -> None:
     """Flag any run with a non-finite float outcome as ``nan`` (in place)."""
     bad = np.zeros(outcomes["status"].shape, bool)
-    for name, arr in outcomes.items():
+    for arr in outcomes.values():
         if np.issubdtype(arr.dtype, np.floating):
             bad |= ~np.isfinite(arr.reshape(arr.shape[0], -1)).all(axis=1)
-    outcomes["status"] = np.where(bad & (outcomes["status"] == Status.ok), Status.nan,
-                                  outcomes["status"]).astype(np.int32)
+    outcomes["status"] = np.where(
+        bad & (outcomes["status"] == Status.ok), Status.nan, outcomes["status"]
+    ).astype(np.int32)
 
 
 def run_study(
@@ -191,9 +191,7 @@ def run_study(
     if bar is not None:
         bar.close()
     fields = parts[0]._fields
-    outcomes = {
-        name: np.concatenate([getattr(p, name) for p in parts])[:runs] for name in fields
-    }
+    outcomes = {name: np.concatenate([getattr(p, name) for p in parts])[:runs] for name in fields}
     _nan_to_status(outcomes)
     return Study(scenario, runs, seed, outcomes, compile_s, wall_s, n_dev, chunk)
 

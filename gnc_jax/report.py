@@ -47,9 +47,11 @@ def _impactor_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathli
     ax.set_xlabel("B·T − aim (m)")
     ax.set_ylabel("B·R − aim (m)")
     ax.set_aspect("equal", adjustable="datalim")
-    ax.set_title(f"{scenario.name}: B-plane impact points\n"
-                 f"miss RMS {summary.get('miss_rms_m', np.nan):.1f} m, "
-                 f"max {summary.get('miss_max_m', np.nan):.1f} m")
+    ax.set_title(
+        f"{scenario.name}: B-plane impact points\n"
+        f"miss RMS {summary.get('miss_rms_m', np.nan):.1f} m, "
+        f"max {summary.get('miss_max_m', np.nan):.1f} m"
+    )
     ax.legend(loc="upper right", fontsize=8)
     ax.grid(alpha=0.3)
     files.append(out / "b_plane.png")

@@ -22,7 +22,7 @@ def comparison_rows(summary: dict) -> list[tuple[str, str, str]]:
     rows = []
     for key, paper in summary.get("paper", {}).items():
         ours = summary.get(key)
-        fmt = (lambda v: f"{v:.4g}" if isinstance(v, float) else str(v))
+        fmt = lambda v: f"{v:.4g}" if isinstance(v, float) else str(v)
         rows.append((LABELS.get(key, key), fmt(paper), "—" if ours is None else fmt(ours)))
     return rows
 

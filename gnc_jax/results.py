@@ -18,9 +18,11 @@ from ._status import Status
 def _machine_note(study) -> str:
     import jax
 
-    return (f"{platform.machine()} {os.cpu_count()} cores, {study.n_devices} XLA host devices, "
-            f"jax {jax.__version__}, {platform.python_implementation()} "
-            f"{platform.python_version()}")
+    return (
+        f"{platform.machine()} {os.cpu_count()} cores, {study.n_devices} XLA host devices, "
+        f"jax {jax.__version__}, {platform.python_implementation()} "
+        f"{platform.python_version()}"
+    )
 
 
 def _impactor_stats(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:

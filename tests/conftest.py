@@ -1,6 +1,7 @@
-import gnc_jax  # noqa: F401  (turns on float64 and host devices before anything else)
 import jax
 import pytest
+
+import gnc_jax  # noqa: F401  (turns on float64 and host devices before anything else)
 
 
 def pytest_addoption(parser):

@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from gnc_jax.dynamics.impactor import Engine, ImpactorState, RelativeDynamics, propagate, vector_field
+from gnc_jax.dynamics.impactor import (
+    Engine,
+    ImpactorState,
+    RelativeDynamics,
+    propagate,
+    vector_field,
+)
 
 
 def test_rk4_matches_dop853_with_gravity_tide_and_thrust():
@@ -15,7 +21,9 @@ def test_rk4_matches_dop853_with_gravity_tide_and_thrust():
     eng = Engine(jnp.asarray(88.0), jnp.asarray(230.0))
     thrust = jnp.array([0.0, 88.0, 0.0])
     flow = eng.mass_flow(1.0)
-    y0 = ImpactorState(jnp.array([2.0e6, 1e4, -3e4]), jnp.array([-1.0e3, 5.0, 2.0]), jnp.asarray(372.0))
+    y0 = ImpactorState(
+        jnp.array([2.0e6, 1e4, -3e4]), jnp.array([-1.0e3, 5.0, 2.0]), jnp.asarray(372.0)
+    )
     duration = 1500.0
     y = propagate(dyn, y0, thrust, flow, duration, 1500)
 

@@ -23,14 +23,16 @@ BAD_INPUT = [
     (["run", "no-such-scenario"], "scenario: unknown scenario 'no-such-scenario'"),
     (["run", "deep-impact-los", "--set", "guidance.kk1=3"], "guidance.kk1: unknown field"),
     (["run", "deep-impact-los", "--set", "warp.speed=3"], "warp: unknown section"),
-    (["run", "deep-impact-los", "--set", "guidance.k1=\"four\""], "guidance.k1: expected a number"),
+    (["run", "deep-impact-los", "--set", 'guidance.k1="four"'], "guidance.k1: expected a number"),
     (["run", "deep-impact-los", "--set", "guidance.law=pn"], "guidance.law: got 'pn'"),
     (["run", "deep-impact-los", "--set", "spacecraft.mass_kg=-372"], "spacecraft.mass_kg: -372"),
     (["run", "deep-impact-los", "--set", "spacecraft.thrust_n=0"], "spacecraft.thrust_n: 0"),
     (["run", "deep-impact-los", "--set", "guidance.k2=5"], "guidance.k2: 5 > k1 = 4"),
     (["run", "deep-impact-los", "--set", "guidance.dt_s=7"], "guidance.dt_s: 7 s does not divide"),
-    (["run", "deep-impact-los", "--set", "approach.reference_normal=[1.0,0.0,0.0]"],
-     "approach.reference_normal: parallel"),
+    (
+        ["run", "deep-impact-los", "--set", "approach.reference_normal=[1.0,0.0,0.0]"],
+        "approach.reference_normal: parallel",
+    ),
     (["run", "deep-impact-los", "--runs", "0"], "--runs: 0; allowed: an integer >= 1"),
     (["run", "deep-impact-los", "--runs", "-5"], "--runs: -5; allowed"),
     (["run", "deep-impact-los", "--seed", "x"], "--seed: 'x'"),
@@ -102,15 +104,36 @@ def test_list(capsys):
 
 def test_run_writes_results_and_report(tmp_path, capsys):
     out = tmp_path / "los"
-    argv = ["run", "deep-impact-los", "--runs", "6", "--seed", "2", "--out", str(out),
-            "--no-progress"] + [x for s in SHORT for x in ("--set", s)]
+    argv = [
+        "run",
+        "deep-impact-los",
+        "--runs",
+        "6",
+        "--seed",
+        "2",
+        "--out",
+        str(out),
+        "--no-progress",
+    ] + [x for s in SHORT for x in ("--set", s)]
     assert cli.main(argv) == 0
     printed = capsys.readouterr().out
     assert "miss_rms_m" in printed and "paper vs gnc_jax" in printed
     summary = json.loads((out / "summary.json").read_text())
-    for key in ("scenario", "runs", "failed", "seed", "wall_s", "compile_s", "miss_rms_m",
-                "miss_mean_m", "miss_max_m", "dv_mean_mps", "dv_max_mps", "firings_max",
-                "firings_mode"):
+    for key in (
+        "scenario",
+        "runs",
+        "failed",
+        "seed",
+        "wall_s",
+        "compile_s",
+        "miss_rms_m",
+        "miss_mean_m",
+        "miss_max_m",
+        "dv_mean_mps",
+        "dv_max_mps",
+        "firings_max",
+        "firings_mode",
+    ):
         assert key in summary, key
     table = pq.read_table(out / "runs.parquet")
     assert table.num_rows == 6
@@ -133,8 +156,10 @@ def test_report_of_missing_dir_is_an_error(tmp_path, capsys):
 
 
 def test_reproduce_side_by_side(tmp_path, capsys, monkeypatch):
-    short = {name: gj.load_scenario(name, overrides=SHORT)
-             for name in ("deep-impact-los", "deep-impact-predictive")}
+    short = {
+        name: gj.load_scenario(name, overrides=SHORT)
+        for name in ("deep-impact-los", "deep-impact-predictive")
+    }
     monkeypatch.setattr("gnc_jax.reproduction.list_scenarios", lambda: list(short.values()))
     assert cli.main(["reproduce", "--out", str(tmp_path), "--runs", "4", "--no-progress"]) == 0
     out = capsys.readouterr().out

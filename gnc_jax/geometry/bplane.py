@@ -8,7 +8,7 @@ B-plane frame.
 
 import jax.numpy as jnp
 
-from .._types import Float, Array, Matrix3, Vector3
+from .._types import Array, Float, Matrix3, Vector3
 
 #: |S x h| below this is treated as S parallel to h, where T is undefined.
 PARALLEL_TOLERANCE = 1e-9

@@ -4,6 +4,13 @@ from .base import AbstractImpactorGuidance, EngineCommand, ImpactorGuidanceConte
 from .los import LOSGuidanceState, LOSSwitchingCurveGuidance, switching_curve
 from .predictive import PredictiveGuidance, PredictiveGuidanceState
 
-__all__ = ["AbstractImpactorGuidance", "EngineCommand", "ImpactorGuidanceContext",
-           "LOSGuidanceState", "LOSSwitchingCurveGuidance", "switching_curve",
-           "PredictiveGuidance", "PredictiveGuidanceState"]
+__all__ = [
+    "AbstractImpactorGuidance",
+    "EngineCommand",
+    "ImpactorGuidanceContext",
+    "LOSGuidanceState",
+    "LOSSwitchingCurveGuidance",
+    "switching_curve",
+    "PredictiveGuidance",
+    "PredictiveGuidanceState",
+]

@@ -73,12 +73,10 @@ class AbstractImpactorGuidance(eqx.Module):
     """Base class of impactor guidance laws (see the module docstring for the protocol)."""
 
     @abc.abstractmethod
-    def init(self, nav, ctx: ImpactorGuidanceContext):
-        ...
+    def init(self, nav, ctx: ImpactorGuidanceContext): ...
 
     def plan(self, state, nav, t, ctx: ImpactorGuidanceContext):
         return state
 
     @abc.abstractmethod
-    def step(self, state, nav, t, ctx: ImpactorGuidanceContext):
-        ...
+    def step(self, state, nav, t, ctx: ImpactorGuidanceContext): ...

@@ -77,9 +77,7 @@ class LOSSwitchingCurveGuidance(AbstractImpactorGuidance):
             p_off = jax.nn.sigmoid((1.0 - omega / w_close) / self.temperature)
             on = p_on + (1.0 - p_on) * (1.0 - p_off) * state.engine_on
         else:
-            on = jnp.where(
-                omega >= w_open, 1.0, jnp.where(omega <= w_close, 0.0, state.engine_on)
-            )
+            on = jnp.where(omega >= w_open, 1.0, jnp.where(omega <= w_close, 0.0, state.engine_on))
         on = jnp.where(t < ctx.cutoff_time_s, on, 0.0)
         # Eq. 19 up to sign: the zero-effort-miss direction -rho_dot x (rho_dot x rho) points
         # from the impactor to the closest-approach offset, so thrusting along it reduces |omega|.

@@ -47,7 +47,9 @@ class PredictiveGuidance(AbstractImpactorGuidance):
 
     def init(self, nav, ctx: ImpactorGuidanceContext) -> PredictiveGuidanceState:
         z = jnp.zeros(())
-        return PredictiveGuidanceState(z - 1.0, z, ctx.c_bi[1], z, jnp.asarray(ctx.mass_kg, float), z, z)
+        return PredictiveGuidanceState(
+            z - 1.0, z, ctx.c_bi[1], z, jnp.asarray(ctx.mass_kg, float), z, z
+        )
 
     def predict_b_plane(self, nav, t, t_burn, dv, mass_kg, ctx) -> Float[Array, "2"]:
         """B-plane point after coasting from ``t`` to ``t_burn`` and a finite burn of ``dv``."""
@@ -57,7 +59,11 @@ class PredictiveGuidance(AbstractImpactorGuidance):
         dv_n = _safe_norm(dv)
         duration = dv_n * mass_kg / thrust
         y = propagate(
-            ctx.dynamics, y, thrust * dv / dv_n, ctx.engine.mass_flow(1.0), duration,
+            ctx.dynamics,
+            y,
+            thrust * dv / dv_n,
+            ctx.engine.mass_flow(1.0),
+            duration,
             self.predictor_steps,
         )
         b, _ = coast_to_b_plane(ctx.dynamics, y, ctx.c_bi, self.predictor_steps)

@@ -3,5 +3,11 @@
 from .loader import Scenario, list_scenarios, load_scenario, packaged_names
 from .schema import Field, ScenarioError
 
-__all__ = ["Field", "Scenario", "ScenarioError", "list_scenarios", "load_scenario",
-           "packaged_names"]
+__all__ = [
+    "Field",
+    "Scenario",
+    "ScenarioError",
+    "list_scenarios",
+    "load_scenario",
+    "packaged_names",
+]

@@ -60,8 +60,14 @@ class Scenario:
         return _build(self._meta(), raw, self.paper, self.source)
 
     def _meta(self) -> dict:
-        return dict(name=self.name, kind=self.kind, description=self.description,
-                    reference=self.reference, runs=self.runs, seed=self.seed)
+        return dict(
+            name=self.name,
+            kind=self.kind,
+            description=self.description,
+            reference=self.reference,
+            runs=self.runs,
+            seed=self.seed,
+        )
 
     def to_dict(self) -> dict:
         return {"scenario": self._meta(), **self.config, "paper": dict(self.paper)}
@@ -76,7 +82,8 @@ def _build(meta: dict, raw: dict, paper: dict, source: str) -> Scenario:
     unknown = set(meta) - _META_FIELDS
     if unknown:
         raise ScenarioError(
-            f"scenario.{sorted(unknown)[0]}: unknown field; allowed: {', '.join(sorted(_META_FIELDS))}"
+            f"scenario.{sorted(unknown)[0]}: unknown field; "
+            f"allowed: {', '.join(sorted(_META_FIELDS))}"
         )
     kind = meta.get("kind")
     if kind not in KINDS:

@@ -6,8 +6,16 @@ from .impactor import (
     ImpactorOutcome,
     ImpactorSimulation,
     StepRecord,
+)
+from .impactor import (
     simulate as simulate_impactor,
 )
 
-__all__ = ["impactor", "ImpactorErrors", "ImpactorOutcome", "ImpactorSimulation", "StepRecord",
-           "simulate_impactor"]
+__all__ = [
+    "impactor",
+    "ImpactorErrors",
+    "ImpactorOutcome",
+    "ImpactorSimulation",
+    "StepRecord",
+    "simulate_impactor",
+]

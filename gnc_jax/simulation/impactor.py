@@ -303,12 +303,8 @@ def simulate(
         nav_sigma_b_m=sigma_b,
         **draws,
     )
-    finite = jnp.all(
-        jnp.array([jnp.all(jnp.isfinite(jnp.asarray(x))) for x in outcome[1:]])
-    )
-    outcome = outcome._replace(
-        status=jnp.where(finite, Status.ok, Status.nan).astype(jnp.int32)
-    )
+    finite = jnp.all(jnp.array([jnp.all(jnp.isfinite(jnp.asarray(x))) for x in outcome[1:]]))
+    outcome = outcome._replace(status=jnp.where(finite, Status.ok, Status.nan).astype(jnp.int32))
     if record:
         rec = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[2:]), rec)
     return outcome, rec
@@ -324,8 +320,18 @@ def build(scenario) -> tuple[ImpactorSimulation, AbstractImpactorGuidance]:
     from ..scenario.impactor import time_of_flight_s
 
     cfg = scenario.config
-    a, sc, dy, cam, nv, er, g = (cfg[k] for k in (
-        "approach", "spacecraft", "dynamics", "camera", "navigation", "errors", "guidance"))
+    a, sc, dy, cam, nv, er, g = (
+        cfg[k]
+        for k in (
+            "approach",
+            "spacecraft",
+            "dynamics",
+            "camera",
+            "navigation",
+            "errors",
+            "guidance",
+        )
+    )
     f = lambda x: jnp.asarray(x, dtype=jnp.float64)  # noqa: E731
     r0 = f(a["position_km"]) * 1e3
     v0 = f(a["velocity_kmps"]) * 1e3

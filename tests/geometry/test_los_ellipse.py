@@ -34,11 +34,15 @@ def test_unforced_miss_equals_brute_force_closest_approach():
     for _ in range(50):
         rho, rho_dot = random_geometry(rng)
         t_ca = -rho @ rho_dot / (rho_dot @ rho_dot)
-        res = minimize_scalar(lambda t: np.linalg.norm(rho + rho_dot * t),
-                              bracket=(0.0, t_ca * 1.3 + 1.0), tol=1e-14)
+        res = minimize_scalar(
+            lambda t, rho=rho, rho_dot=rho_dot: np.linalg.norm(rho + rho_dot * t),
+            bracket=(0.0, t_ca * 1.3 + 1.0),
+            tol=1e-14,
+        )
         brute = np.linalg.norm(rho + rho_dot * res.x)
-        grid = np.linalg.norm(rho[None] + rho_dot[None] * np.linspace(0, 2 * t_ca, 200001)[:, None],
-                              axis=1).min()
+        grid = np.linalg.norm(
+            rho[None] + rho_dot[None] * np.linspace(0, 2 * t_ca, 200001)[:, None], axis=1
+        ).min()
         eq7 = float(unforced_miss(jnp.asarray(rho), jnp.asarray(rho_dot)))
         assert eq7 == pytest.approx(brute, rel=1e-7, abs=1e-6)
         assert eq7 <= grid + 1e-6
@@ -54,7 +58,9 @@ def test_los_rate_and_range_rate_by_finite_difference():
     # d(u)/dt = omega x u for the LOS unit vector
     np.testing.assert_allclose(np.cross(omega, u(0.0)), dudt, rtol=1e-6, atol=1e-14)
     rdot = (np.linalg.norm(rho + rho_dot * h) - np.linalg.norm(rho - rho_dot * h)) / (2 * h)
-    assert float(range_rate(jnp.asarray(rho), jnp.asarray(rho_dot))) == pytest.approx(rdot, rel=1e-7)
+    assert float(range_rate(jnp.asarray(rho), jnp.asarray(rho_dot))) == pytest.approx(
+        rdot, rel=1e-7
+    )
 
 
 def test_b_plane_frame_is_right_handed_and_follows_definition():
@@ -72,7 +78,9 @@ def test_b_plane_frame_is_right_handed_and_follows_definition():
 def test_b_plane_frame_parallel_normal_raises():
     with pytest.raises(BPlaneError, match="parallel"):
         check_b_plane_frame([0.0, 0.0, -5.0], [0.0, 0.0, 1.0])
-    assert np.all(np.isnan(np.asarray(b_plane_frame(jnp.array([0.0, 0, 2]), jnp.array([0.0, 0, 1])))[1]))
+    assert np.all(
+        np.isnan(np.asarray(b_plane_frame(jnp.array([0.0, 0, 2]), jnp.array([0.0, 0, 1])))[1])
+    )
 
 
 def test_b_plane_crossing_of_a_straight_line():

@@ -5,7 +5,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from gnc_jax.dynamics.impactor import Engine, ImpactorState, RelativeDynamics, coast_to_b_plane, propagate
+from gnc_jax.dynamics.impactor import (
+    Engine,
+    ImpactorState,
+    RelativeDynamics,
+    coast_to_b_plane,
+    propagate,
+)
 from gnc_jax.geometry import b_plane_frame, los_rate, range_rate, unforced_miss
 from gnc_jax.guidance import (
     ImpactorGuidanceContext,
@@ -20,19 +26,25 @@ from gnc_jax.navigation import NavEstimate
 def context(**kw):
     c = b_plane_frame(jnp.array([-1.0, 0.0, 0.0]), jnp.array([0.0, 0.0, 1.0]))
     base = dict(
-        c_bi=c, aim_initial_m=jnp.zeros(2), aim_final_m=jnp.array([1e3, 3e3]),
-        retarget_time_s=jnp.asarray(6450.0), cutoff_time_s=jnp.asarray(7140.0),
-        engine=Engine(jnp.asarray(88.0), jnp.asarray(230.0)), mass_kg=jnp.asarray(372.0),
+        c_bi=c,
+        aim_initial_m=jnp.zeros(2),
+        aim_final_m=jnp.array([1e3, 3e3]),
+        retarget_time_s=jnp.asarray(6450.0),
+        cutoff_time_s=jnp.asarray(7140.0),
+        engine=Engine(jnp.asarray(88.0), jnp.asarray(230.0)),
+        mass_kg=jnp.asarray(372.0),
         dynamics=RelativeDynamics(jnp.asarray(0.0), jnp.asarray(0.0), jnp.array([1.0, 0, 0])),
-        dt_s=1.0, image_interval_s=15.0,
+        dt_s=1.0,
+        image_interval_s=15.0,
     )
     base.update(kw)
     return ImpactorGuidanceContext(**base)
 
 
 def nav_at(r, v, p=None):
-    return NavEstimate(jnp.concatenate([jnp.asarray(r), jnp.asarray(v)]),
-                       jnp.eye(6) * 1e4 if p is None else p)
+    return NavEstimate(
+        jnp.concatenate([jnp.asarray(r), jnp.asarray(v)]), jnp.eye(6) * 1e4 if p is None else p
+    )
 
 
 def test_switching_curve_is_the_los_rate_of_the_tolerated_miss():
@@ -45,7 +57,8 @@ def test_switching_curve_is_the_los_rate_of_the_tolerated_miss():
         # a geometry with exactly that LOS rate has unforced miss rho_limit (eq. 7 inverted)
         rho_dot = np.array([rdot, w * rho[0], 0.0])
         assert float(unforced_miss(jnp.asarray(rho), jnp.asarray(rho_dot))) == pytest.approx(
-            rho_limit, rel=1e-9)
+            rho_limit, rel=1e-9
+        )
     assert np.isinf(float(switching_curve(100.0, -1e4, 200.0)))
 
 
@@ -56,7 +69,9 @@ def test_thrust_direction_reduces_los_rate(seed):
     r = np.array([rng.uniform(1e6, 7e7), rng.normal() * 1e4, rng.normal() * 1e4])
     v = np.array([-1.02e4, rng.normal() * 0.5, rng.normal() * 0.5])
     law = LOSSwitchingCurveGuidance()
-    state = LOSGuidanceState(*(jnp.zeros(()) for _ in range(5)))._replace(sigma_b_m=jnp.asarray(1.0))
+    state = LOSGuidanceState(*(jnp.zeros(()) for _ in range(5)))._replace(
+        sigma_b_m=jnp.asarray(1.0)
+    )
     cmd, _ = law.step(state, nav_at(r, v), 0.0, ctx)
     n = np.asarray(cmd.direction)
     assert float(cmd.throttle) == 1.0  # 1 m sigma: any sizeable miss opens the engine
@@ -97,8 +112,12 @@ def test_relaxed_switch_tends_to_the_hard_logic():
     ctx = context(retarget_time_s=jnp.asarray(1e9))
     r = np.array([5e7, 0.0, 0.0])
     w_open = float(switching_curve(5e7, -1.02e4, 400.0))
-    for omega, prev, expected in ((1.2 * w_open, 0.0, 1.0), (0.8 * w_open, 0.0, 0.0),
-                                  (0.8 * w_open, 1.0, 1.0), (0.1 * w_open, 1.0, 0.0)):
+    for omega, prev, expected in (
+        (1.2 * w_open, 0.0, 1.0),
+        (0.8 * w_open, 0.0, 0.0),
+        (0.8 * w_open, 1.0, 1.0),
+        (0.1 * w_open, 1.0, 0.0),
+    ):
         v = np.array([-1.02e4, -omega * 5e7, 0.0])
         st = LOSGuidanceState(jnp.asarray(prev), jnp.asarray(100.0), *(jnp.zeros(()),) * 3)
         law = LOSSwitchingCurveGuidance(temperature=jnp.asarray(1e-3), relaxed=True)
@@ -124,9 +143,16 @@ def test_predictive_burn_nulls_the_predicted_miss():
     nav = nav_at(r, v)
     state = law.plan(law.init(nav, ctx), nav, 1195.0, ctx)
     assert float(state.burn_start_s) == 1200.0
-    assert float(state.predicted_miss_m) == pytest.approx(np.hypot(*np.asarray(
-        coast_to_b_plane(ctx.dynamics, ImpactorState(jnp.asarray(r), jnp.asarray(v), 372.0),
-                         ctx.c_bi, 1)[0])), rel=1e-6)
+    assert float(state.predicted_miss_m) == pytest.approx(
+        np.hypot(
+            *np.asarray(
+                coast_to_b_plane(
+                    ctx.dynamics, ImpactorState(jnp.asarray(r), jnp.asarray(v), 372.0), ctx.c_bi, 1
+                )[0]
+            )
+        ),
+        rel=1e-6,
+    )
     # Execute the commanded finite burn exactly and coast: the B-plane point is the aim point.
     y = ImpactorState(jnp.asarray(r), jnp.asarray(v), jnp.asarray(372.0))
     y = propagate(ctx.dynamics, y, jnp.zeros(3), 0.0, 5.0, 1)
@@ -141,7 +167,9 @@ def test_predictive_burn_nulls_the_predicted_miss():
 def test_predictive_throttle_covers_the_burn_exactly():
     ctx = context()
     law = PredictiveGuidance()
-    st = law.init(None, ctx)._replace(burn_start_s=jnp.asarray(10.3), burn_duration_s=jnp.asarray(2.5))
+    st = law.init(None, ctx)._replace(
+        burn_start_s=jnp.asarray(10.3), burn_duration_s=jnp.asarray(2.5)
+    )
     total = 0.0
     for k in range(20):
         cmd, st = law.step(st, None, float(k), ctx)

@@ -22,8 +22,11 @@ def test_small_rotation_matches_scipy():
     rng = np.random.default_rng(0)
     for scale in (1e-6, 1e-3, 1.0):
         theta = rng.normal(size=3) * scale
-        np.testing.assert_allclose(np.asarray(small_rotation(jnp.asarray(theta))),
-                                   Rotation.from_rotvec(theta).as_matrix(), atol=1e-15)
+        np.testing.assert_allclose(
+            np.asarray(small_rotation(jnp.asarray(theta))),
+            Rotation.from_rotvec(theta).as_matrix(),
+            atol=1e-15,
+        )
     np.testing.assert_allclose(np.asarray(small_rotation(jnp.zeros(3))), np.eye(3))
 
 
@@ -35,7 +38,9 @@ def test_pinhole_projection():
     np.testing.assert_allclose(cm[2], [1, 0, 0])
     xc = cm @ np.asarray(los)
     np.testing.assert_allclose(np.asarray(project(c, los, 2.103)), 2.103 * xc[:2] / xc[2])
-    np.testing.assert_allclose(np.asarray(los_angles(c, jnp.array([2.0, 0, 0]))), [0, 0], atol=1e-16)
+    np.testing.assert_allclose(
+        np.asarray(los_angles(c, jnp.array([2.0, 0, 0]))), [0, 0], atol=1e-16
+    )
 
 
 def test_ekf_update_matches_numpy_kalman_update():
@@ -62,8 +67,9 @@ def test_ekf_update_matches_numpy_kalman_update():
     x_ref = x + k @ (z - h(x))
     p_ref = (np.eye(6) - k @ hj) @ p
 
-    nav, innov = update_los(NavEstimate(jnp.asarray(x), jnp.asarray(p)), jnp.asarray(z),
-                            jnp.asarray(c), sigma)
+    nav, innov = update_los(
+        NavEstimate(jnp.asarray(x), jnp.asarray(p)), jnp.asarray(z), jnp.asarray(c), sigma
+    )
     np.testing.assert_allclose(np.asarray(nav.x), x_ref, rtol=1e-9, atol=1e-6)
     np.testing.assert_allclose(np.asarray(nav.p), p_ref, rtol=1e-6, atol=1e-9 * np.abs(p).max())
     np.testing.assert_allclose(np.asarray(innov), z - h(x), rtol=1e-9)

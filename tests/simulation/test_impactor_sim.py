@@ -32,8 +32,9 @@ def test_vmapped_batch_equals_per_run_loop(short_scenario):
     for i in range(6):
         one, _ = gj.simulate_one(short_scenario, index=i, seed=3, record=False)
         for name in ("miss_m", "dv_mps", "b_t_m", "nav_sigma_b_m"):
-            np.testing.assert_allclose(study.outcomes[name][i], getattr(one, name),
-                                       rtol=1e-9, atol=1e-9)
+            np.testing.assert_allclose(
+                study.outcomes[name][i], getattr(one, name), rtol=1e-9, atol=1e-9
+            )
         assert study.outcomes["firings"][i] == one.firings
 
 
@@ -67,8 +68,7 @@ def test_nan_runs_are_counted_and_left_out(monkeypatch, short_scenario):
         bad = out.delivery_error_m[1] > 0.0  # about half of the runs
         return out._replace(miss_m=jnp.where(bad, jnp.nan, out.miss_m)), trace
 
-    monkeypatch.setitem(montecarlo.SYSTEMS, "impactor",
-                        montecarlo.System(system.build, poisoned))
+    monkeypatch.setitem(montecarlo.SYSTEMS, "impactor", montecarlo.System(system.build, poisoned))
     study = gj.run_study(short_scenario, runs=16, seed=5, progress=False)
     bad = study.outcomes["delivery_error_m"][:, 1] > 0.0
     assert 0 < bad.sum() < 16
@@ -96,8 +96,9 @@ def test_gradient_of_smoothed_miss_matches_finite_differences():
     grad = np.asarray(jax.jit(jax.grad(objective))(gains))
     assert np.all(np.isfinite(grad))
     h = 1e-4
-    fd = np.array([(objective(gains + h * e) - objective(gains - h * e)) / (2 * h)
-                   for e in np.eye(2)])
+    fd = np.array(
+        [(objective(gains + h * e) - objective(gains - h * e)) / (2 * h) for e in np.eye(2)]
+    )
     assert np.abs(grad).max() > 0.0
     np.testing.assert_allclose(grad, fd, rtol=2e-3, atol=1e-6 * np.abs(fd).max())
 
