@@ -1,0 +1,222 @@
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+from gnc_jax.root_finding import RootStatus, bounded_regula_falsi
+
+
+def _sequential_reference(
+    f, x_prev, step, lower, upper, tol, n_bracket, n_iter, illinois, decreasing
+):
+    """Seed 003 eqs. 11-15 as a plain early-exit Python loop: (x, evaluations, status)."""
+    x0 = min(max(x_prev, lower), upper)
+    f0 = f(x0)
+    evaluated = [(x0, f0)]
+
+    def best():
+        return min(evaluated, key=lambda p: abs(p[1]))[0]
+
+    if abs(f0) < tol:
+        return x0, 1, RootStatus.ok
+    up = (f0 if decreasing else -f0) >= 0
+    bound = upper if up else lower
+    x_same, f_same, bracket = x0, f0, None
+    if x0 != bound:
+        for n in range(1, n_bracket + 1):
+            x_n = min(x0 + n * step, upper) if up else max(x0 - n * step, lower)
+            f_n = f(x_n)
+            evaluated.append((x_n, f_n))
+            if abs(f_n) < tol:
+                return x_n, len(evaluated), RootStatus.ok
+            if np.sign(f_n) != np.sign(f0):
+                bracket = sorted([(x_same, f_same), (x_n, f_n)])
+                break
+            x_same, f_same = x_n, f_n
+            if x_n == bound:
+                break
+    if bracket is None:
+        return best(), len(evaluated), RootStatus.not_bracketed
+    (a, fa), (b, fb) = bracket
+    last_kept = 0
+    for _ in range(n_iter):
+        c = min(max((a * fb - b * fa) / (fb - fa), a), b)
+        fc = f(c)
+        evaluated.append((c, fc))
+        if abs(fc) < tol:
+            return c, len(evaluated), RootStatus.ok
+        if np.sign(fc) == np.sign(fa):
+            a, fa, kept = c, fc, +1
+            if illinois and last_kept == kept:
+                fb *= 0.5
+        else:
+            b, fb, kept = c, fc, -1
+            if illinois and last_kept == kept:
+                fa *= 0.5
+        last_kept = kept
+    return best(), len(evaluated), RootStatus.no_convergence
+
+
+# (name, jax function, numpy function, decreasing, lower, upper, x_prev, step)
+CASES = [
+    ("cubic", lambda x: x**3 - 2 * x - 5, lambda x: x**3 - 2 * x - 5, False, 0.0, 4.0, 0.3, 0.4),
+    (
+        "tanh",
+        lambda x: 0.3 - jnp.tanh(4 * (x - 1.1)),
+        lambda x: 0.3 - math.tanh(4 * (x - 1.1)),
+        True,
+        -2.0,
+        3.0,
+        2.9,
+        0.25,
+    ),
+    (
+        "range_vs_bank",
+        lambda x: jnp.cos(x) - 0.35,
+        lambda x: math.cos(x) - 0.35,
+        True,
+        0.0,
+        math.pi,
+        0.05,
+        0.1,
+    ),
+    (
+        "convex_exp",
+        lambda x: jnp.exp(x) - 10.0,
+        lambda x: math.exp(x) - 10.0,
+        False,
+        -1.0,
+        5.0,
+        4.9,
+        0.3,
+    ),
+]
+
+
+@pytest.mark.parametrize("illinois", [True, False])
+@pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
+def test_matches_brentq_and_sequential_loop(case, illinois):
+    _, f_jax, f_np, decreasing, lower, upper, x_prev, step = case
+    tol, n_bracket, n_iter = 1e-11, 40, 60
+    solve = jax.jit(
+        lambda x: bounded_regula_falsi(
+            f_jax,
+            x,
+            step,
+            lower,
+            upper,
+            tol,
+            n_bracket,
+            n_iter,
+            illinois=illinois,
+            decreasing=decreasing,
+        )
+    )
+    result = solve(x_prev)
+    root = brentq(f_np, lower, upper, xtol=1e-15, rtol=4 * np.finfo(float).eps)
+    assert int(result.status) == RootStatus.ok and bool(result.converged)
+    assert abs(float(result.f_x)) < tol
+    assert float(result.x) == pytest.approx(root, abs=1e-9)
+    # The start is far from the root: several bracketing steps are needed.
+    assert abs(x_prev - root) > 2 * step
+    x_ref, n_ref, status_ref = _sequential_reference(
+        f_np, x_prev, step, lower, upper, tol, n_bracket, n_iter, illinois, decreasing
+    )
+    assert int(result.n_evals_early_exit) == n_ref
+    assert int(result.status) == status_ref
+    assert float(result.x) == pytest.approx(x_ref, abs=1e-12)
+    assert int(result.n_evals_total) == 1 + n_bracket + n_iter
+
+
+def test_illinois_beats_plain_regula_falsi_on_convex_function():
+    # A wide bracket [-1, 4] on a convex f: plain regula falsi keeps x = 4 as an endpoint for
+    # ever and creeps up from below; the Illinois rule releases it.
+    f = lambda x: jnp.exp(x) - 10.0
+    common = dict(
+        step=5.0, lower=-1.0, upper=5.0, tol=1e-10, n_bracket=5, n_iter=200, decreasing=False
+    )
+    plain = bounded_regula_falsi(f, -1.0, illinois=False, **common)
+    fast = bounded_regula_falsi(f, -1.0, illinois=True, **common)
+    assert int(plain.status) == int(fast.status) == RootStatus.ok
+    assert int(fast.n_evals_early_exit) <= 15 < 40 <= int(plain.n_evals_early_exit)
+
+
+def test_warm_start_inside_tolerance_costs_one_evaluation():
+    root = math.acos(0.35)
+    result = bounded_regula_falsi(
+        lambda x: jnp.cos(x) - 0.35, root + 1e-9, 0.1, 0.0, math.pi, 1e-6, 10, 10
+    )
+    assert int(result.n_evals_early_exit) == 1
+    assert int(result.status) == RootStatus.ok
+    assert float(result.x) == root + 1e-9
+
+
+@pytest.mark.parametrize("c, bound", [(-1.5, math.pi), (1.5, 0.0)])
+def test_not_bracketed_returns_the_bound(c, bound):
+    # cos x - c has no root in [0, pi]: the search runs to the bound in the direction of eq. 15
+    # and saturates there (the bound has the smaller |f| of the points tried).
+    x_prev, step = 1.0, 0.3
+    result = bounded_regula_falsi(
+        lambda x: jnp.cos(x) - c, x_prev, step, 0.0, math.pi, 1e-8, 20, 10
+    )
+    assert int(result.status) == RootStatus.not_bracketed and not bool(result.converged)
+    assert float(result.x) == bound
+    assert float(result.f_x) == pytest.approx(math.cos(bound) - c)
+    n_steps_to_bound = math.ceil(abs(bound - x_prev) / step)
+    assert int(result.n_evals_early_exit) == 1 + n_steps_to_bound
+
+
+def test_too_few_bracketing_steps_is_not_bracketed():
+    result = bounded_regula_falsi(lambda x: jnp.cos(x) - 0.35, 0.05, 0.1, 0.0, math.pi, 1e-8, 3, 10)
+    assert int(result.status) == RootStatus.not_bracketed
+    assert int(result.n_evals_early_exit) == 4
+    assert float(result.x) == pytest.approx(0.35)  # the last, best point tried
+
+
+def test_too_few_iterations_is_no_convergence():
+    f = lambda x: jnp.exp(x) - 10.0
+    result = bounded_regula_falsi(
+        f, 4.9, 0.3, -1.0, 5.0, 1e-12, 30, 2, illinois=False, decreasing=False
+    )
+    assert int(result.status) == RootStatus.no_convergence and not bool(result.converged)
+    n_bracketing = math.ceil((4.9 - math.log(10.0)) / 0.3)  # steps of 0.3 down to the root
+    assert int(result.n_evals_early_exit) == 1 + n_bracketing + 2
+    assert int(result.n_evals_total) == 1 + 30 + 2
+
+
+def test_vmap_over_targets_equals_python_loop():
+    def solve(c, x_prev):
+        return bounded_regula_falsi(
+            lambda x: jnp.cos(x) - c, x_prev, 0.2, 0.0, math.pi, 1e-9, 20, 30
+        )
+
+    cs = jnp.linspace(-1.2, 1.2, 49)  # includes targets with no root in [0, pi]
+    x_prevs = jnp.linspace(0.0, math.pi, 49)[::-1]
+    batched = jax.jit(jax.vmap(solve))(cs, x_prevs)
+    one = jax.jit(solve)
+    for i, (c, x_prev) in enumerate(zip(cs, x_prevs)):
+        single = one(c, x_prev)
+        for name in single._fields:
+            np.testing.assert_array_equal(getattr(batched, name)[i], getattr(single, name))
+    ok = batched.status == RootStatus.ok
+    assert bool(jnp.all(ok == (jnp.abs(cs) <= 1.0)))
+    assert bool(jnp.all(jnp.abs(jnp.cos(batched.x[ok]) - cs[ok]) < 1e-9))
+    inner = jnp.abs(cs) < 0.99  # away from the ends, where acos is steep
+    np.testing.assert_allclose(batched.x[inner], jnp.arccos(cs[inner]), atol=1e-8)
+
+
+def test_gradient_through_the_corrector_is_finite():
+    def root_of(c):
+        return bounded_regula_falsi(
+            lambda x: jnp.cos(x) - c, 0.1, 0.2, 0.0, math.pi, 1e-10, 20, 30
+        ).x
+
+    cs = jnp.array([-0.9, -0.3, 0.0, 0.35, 0.8, 1.5])  # 1.5: not bracketed, saturated
+    grads = jax.vmap(jax.grad(root_of))(cs)
+    assert bool(jnp.all(jnp.isfinite(grads)))
+    # Where a root exists the secant-based derivative approximates dx/dc = -1/sin(x).
+    expected = -1.0 / jnp.sqrt(1.0 - cs[:-1] ** 2)
+    np.testing.assert_allclose(grads[:-1], expected, rtol=1e-4)
