@@ -102,6 +102,8 @@ def cmd_run(args) -> int:
         f"study {study.wall_s:.2f} s on {study.n_devices} devices"
     )
     _print_summary(summary)
+    if args.set:
+        print("  (modified by --set: the paper's numbers are for the packaged scenario)")
     if args.out:
         paths = study.save(args.out)
         print("wrote " + ", ".join(paths.values()))

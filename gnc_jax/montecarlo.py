@@ -21,7 +21,7 @@ from jax.sharding import Mesh, PartitionSpec
 
 from ._status import Status
 from .scenario import Scenario, ScenarioError
-from .simulation import impactor
+from .simulation import capsule, impactor
 
 
 @dataclasses.dataclass(frozen=True)
@@ -32,7 +32,10 @@ class System:
     simulate: Callable  # (sim, law, key, record=False) -> (outcome NamedTuple, trace)
 
 
-SYSTEMS: dict[str, System] = {"impactor": System(impactor.build, impactor.simulate)}
+SYSTEMS: dict[str, System] = {
+    "impactor": System(impactor.build, impactor.simulate),
+    "capsule": System(capsule.build, capsule.simulate),
+}
 
 
 def run_key(seed: int, index):

@@ -122,6 +122,11 @@ def report(run_dir, out_dir=None) -> list[str]:
     from .results import load_results
 
     summary, runs, scenario = load_results(run_dir)
+    if scenario.kind not in FIGURES:
+        raise FileNotFoundError(
+            f"report: no figures for {scenario.kind!r} studies yet; "
+            f"allowed: {', '.join(FIGURES)} studies"
+        )
     out = pathlib.Path(out_dir or run_dir)
     out.mkdir(parents=True, exist_ok=True)
     return [str(p) for p in FIGURES[scenario.kind](summary, runs, scenario, out)]

@@ -14,6 +14,16 @@ LABELS = {
     "dv_max_mps": "Δv max (m/s)",
     "firings_max": "firings max",
     "firings_mode": "firings mode",
+    "downrange_err_km_3sigma": "downrange 3σ (km)",
+    "crossrange_err_km_3sigma": "crossrange 3σ (km)",
+    "switch_speed_mps_mean": "switch V mean (m/s)",
+    "switch_altitude_km_mean": "switch H mean (km)",
+    "switch_hdot_mps_mean": "switch Ḣ mean (m/s)",
+    "switch_range_km_mean": "switch range mean (km)",
+    "predictions_mean": "predictions/traj mean",
+    "predictions_max": "predictions/traj max",
+    "cycle_predictions_max_mean": "max per cycle, mean",
+    "cycle_predictions_max": "max per cycle, max",
 }
 
 

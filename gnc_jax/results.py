@@ -50,7 +50,49 @@ def _impactor_stats(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
     )
 
 
-STATS = {"impactor": _impactor_stats}
+def _interval(x: np.ndarray) -> dict[str, Any]:
+    m, s = float(np.mean(x)), float(np.std(x))
+    return dict(
+        mean=m,
+        std=s,
+        min=float(np.min(x)),
+        max=float(np.max(x)),
+        three_sigma=[m - 3 * s, m + 3 * s],
+    )
+
+
+def _capsule_stats(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
+    if not ok.any():
+        return {}
+    out: dict[str, Any] = {
+        "downrange_err_km": _interval(o["downrange_err_km"][ok]),
+        "crossrange_err_km": _interval(o["crossrange_err_km"][ok]),
+        "downrange_err_km_3sigma": "{:.2f} .. {:.2f}".format(
+            *_interval(o["downrange_err_km"][ok])["three_sigma"]
+        ),
+        "crossrange_err_km_3sigma": "{:.2f} .. {:.2f}".format(
+            *_interval(o["crossrange_err_km"][ok])["three_sigma"]
+        ),
+        "load_peak_g_max": float(np.max(o["load_peak_g"][ok])),
+        "load_peak_g_mean": float(np.mean(o["load_peak_g"][ok])),
+        "heat_rate_peak_kw_m2_max": float(np.max(o["heat_rate_peak_kw_m2"][ok])),
+        "heat_load_mj_m2_max": float(np.max(o["heat_load_mj_m2"][ok])),
+        "skip_apogee_km_mean": float(np.mean(o["skip_apogee_km"][ok])),
+        "predictions_mean": float(np.mean(o["predictions"][ok])),
+        "predictions_max": int(np.max(o["predictions"][ok])),
+        "cycle_predictions_max_mean": float(np.mean(o["cycle_predictions_max"][ok])),
+        "cycle_predictions_max": int(np.max(o["cycle_predictions_max"][ok])),
+        "pc_cycles_mean": float(np.mean(o["pc_cycles"][ok])),
+        "corrector_failures_total": int(np.sum(o["corrector_failures"][ok])),
+        "reversals_mean": float(np.mean(o["reversals"][ok])),
+    }
+    for name in ("switch_speed_mps", "switch_altitude_km", "switch_hdot_mps", "switch_range_km"):
+        out[f"{name}_mean"] = float(np.mean(o[name][ok]))
+        out[f"{name}_3sigma"] = _interval(o[name][ok])["three_sigma"]
+    return out
+
+
+STATS = {"impactor": _impactor_stats, "capsule": _capsule_stats}
 
 
 def summarize(study) -> dict[str, Any]:

@@ -16,7 +16,7 @@ which is the paper's "predictions per cycle" (seed 003 Table 3).
 
 import enum
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -50,16 +50,23 @@ class RegulaFalsiResult(NamedTuple):
     n_evals_early_exit: Int[Array, ""]
     n_evals_total: Int[Array, ""]
     status: Int[Array, ""]
+    aux: Any = None
+    cost: Any = None
 
 
 class _Best(NamedTuple):
     x: Scalar
     f: Scalar
+    aux: Any
 
 
-def _keep_best(best: _Best, x: Scalar, f: Scalar, active: Bool[Array, ""]) -> _Best:
+def _keep_best(best: _Best, x: Scalar, f: Scalar, aux, active: Bool[Array, ""]) -> _Best:
     better = active & (jnp.abs(f) < jnp.abs(best.f))
-    return _Best(jnp.where(better, x, best.x), jnp.where(better, f, best.f))
+    return _Best(
+        jnp.where(better, x, best.x),
+        jnp.where(better, f, best.f),
+        jax.tree_util.tree_map(lambda a, b: jnp.where(better, a, b), aux, best.aux),
+    )
 
 
 def bounded_regula_falsi(
@@ -73,6 +80,10 @@ def bounded_regula_falsi(
     n_iter: int,
     illinois: bool = True,
     decreasing: bool = True,
+    enabled=True,
+    pass_active: bool = False,
+    has_aux: bool = False,
+    has_cost: bool = False,
 ) -> RegulaFalsiResult:
     """Solve fun(x) = 0 in [lower, upper], warm-started at ``x_prev`` (seed 003 eqs. 11-15).
 
@@ -91,6 +102,18 @@ def bounded_regula_falsi(
         decreasing: monotonicity assumption that picks the bracketing direction (eqs. 14-15).
             True (the seed's case: more bank, less range): f(x_prev) >= 0 steps up, f < 0
             steps down. False: the opposite.
+        enabled: (traced bool) False turns the whole solve into no-op evaluations: under
+            ``vmap`` a run that does not need a solution this cycle costs nothing when ``fun``
+            honours ``active`` (see ``pass_active``).
+        pass_active: call ``fun(x, active)`` where ``active`` says whether the result is
+            used; an expensive ``fun`` (a trajectory prediction in a ``while_loop``) can then
+            skip masked evaluations, so under ``vmap`` the batch pays only for the runs
+            that still iterate.
+        has_aux: ``fun`` returns ``(f, aux)``; the result's ``aux`` is that of the returned x
+            (the evaluated point with the smallest |f|), so a caller gets, say, the whole
+            prediction of its solution without evaluating it again.
+        has_cost: ``fun`` returns ``(f, aux, cost)`` (requires ``has_aux``); the result's
+            ``cost`` is the sum over every evaluation (e.g. integration steps actually taken).
 
     Bracketing: candidates x_n = clip(x_prev +/- n step) are tried until f changes sign; the
     bracket is then [last candidate with the sign of f(x_prev), first with the other sign] --
@@ -106,10 +129,20 @@ def bounded_regula_falsi(
     lower = jnp.asarray(lower, dtype=float)
     upper = jnp.asarray(upper, dtype=float)
     x0 = jnp.clip(jnp.asarray(x_prev, dtype=float), lower, upper)
-    f0 = fun(x0)
-    converged = jnp.abs(f0) < tol
-    best = _Best(x0, f0)
-    n_evals = jnp.asarray(1)
+    enabled = jnp.asarray(enabled)
+
+    def call(x, active):
+        out = fun(x, active) if pass_active else fun(x)
+        if has_cost:
+            f, aux, c = out
+            return f, aux, c
+        return (out + (jnp.zeros(()),)) if has_aux else (out, None, jnp.zeros(()))
+
+    f0, aux0, cost0 = call(x0, enabled)
+    converged = (jnp.abs(f0) < tol) | ~enabled
+    best = _Best(x0, f0, aux0)
+    n_evals = enabled.astype(int)
+    cost = cost0
 
     # --- bracketing (eqs. 14-15) ---
     up = sign * f0 >= 0.0
@@ -117,15 +150,15 @@ def bounded_regula_falsi(
     at_bound = jnp.where(up, x0 >= upper, x0 <= lower)
 
     def bracket_step(carry, n):
-        x_same, f_same, x_other, f_other, found, stop, converged, best, n_evals = carry
+        x_same, f_same, x_other, f_other, found, stop, converged, best, n_evals, cost = carry
         active = ~(found | stop | converged)
         x_n = jnp.where(up, jnp.minimum(x0 + n * step, upper), jnp.maximum(x0 - n * step, lower))
-        f_n = fun(x_n)
+        f_n, aux_n, cost_n = call(x_n, active)
         n_evals = n_evals + active
         converged_n = active & (jnp.abs(f_n) < tol)
         crossed = active & ~converged_n & (jnp.sign(f_n) != jnp.sign(f0))
         same = active & ~converged_n & ~crossed
-        best = _keep_best(best, x_n, f_n, active)
+        best = _keep_best(best, x_n, f_n, aux_n, active)
         return (
             jnp.where(same, x_n, x_same),
             jnp.where(same, f_n, f_same),
@@ -136,12 +169,13 @@ def bounded_regula_falsi(
             converged | converged_n,
             best,
             n_evals,
+            cost + cost_n,
         ), None
 
-    init = (x0, f0, x0, f0, jnp.asarray(False), at_bound, converged, best, n_evals)
+    init = (x0, f0, x0, f0, jnp.asarray(False), at_bound, converged, best, n_evals, cost)
     steps = jnp.arange(1, n_bracket + 1, dtype=float)
-    (x_same, f_same, x_other, f_other, bracketed, _, converged, best, n_evals), _ = jax.lax.scan(
-        bracket_step, init, steps
+    (x_same, f_same, x_other, f_other, bracketed, _, converged, best, n_evals, cost), _ = (
+        jax.lax.scan(bracket_step, init, steps)
     )
 
     # --- regula falsi (eqs. 11-13) on x_a < x_b ---
@@ -150,19 +184,19 @@ def bounded_regula_falsi(
     x_b, f_b = jnp.where(swap, x_same, x_other), jnp.where(swap, f_same, f_other)
 
     def falsi_step(carry, _):
-        x_a, f_a, x_b, f_b, last_kept, converged, best, n_evals = carry
+        x_a, f_a, x_b, f_b, last_kept, converged, best, n_evals, cost = carry
         active = bracketed & ~converged
         # Guarded so masked iterations (no bracket, f_a == f_b) give no NaN, nor NaN gradients.
         ok = active & (f_b != f_a)
         denominator = jnp.where(ok, f_b - f_a, 1.0)
         x_c = jnp.where(ok, (x_a * f_b - x_b * f_a) / denominator, x_a)
         x_c = jnp.clip(x_c, x_a, x_b)  # rounding must not leave the bracket
-        f_c = fun(x_c)
+        f_c, aux_c, cost_c = call(x_c, active)
         n_evals = n_evals + active
         converged_c = active & (jnp.abs(f_c) < tol)
         replace_a = active & ~converged_c & (jnp.sign(f_c) == jnp.sign(f_a))
         replace_b = active & ~converged_c & ~replace_a
-        best = _keep_best(best, x_c, f_c, active)
+        best = _keep_best(best, x_c, f_c, aux_c, active)
         # last_kept: +1 if b was the endpoint kept last time, -1 if a, 0 before the first step.
         kept = jnp.where(replace_a, 1, jnp.where(replace_b, -1, 0))
         halve = illinois & (kept != 0) & (kept == last_kept)
@@ -177,10 +211,11 @@ def bounded_regula_falsi(
             converged | converged_c,
             best,
             n_evals,
+            cost + cost_c,
         ), None
 
-    init = (x_a, f_a, x_b, f_b, jnp.asarray(0), converged, best, n_evals)
-    (*_, converged, best, n_evals), _ = jax.lax.scan(falsi_step, init, None, length=n_iter)
+    init = (x_a, f_a, x_b, f_b, jnp.asarray(0), converged, best, n_evals, cost)
+    (*_, converged, best, n_evals, cost), _ = jax.lax.scan(falsi_step, init, None, length=n_iter)
 
     status = jnp.where(
         converged,
@@ -194,4 +229,6 @@ def bounded_regula_falsi(
         n_evals_early_exit=n_evals,
         n_evals_total=jnp.asarray(1 + n_bracket + n_iter),
         status=status,
+        aux=best.aux,
+        cost=cost,
     )

@@ -200,6 +200,8 @@ def test_vmap_over_targets_equals_python_loop():
     for i, (c, x_prev) in enumerate(zip(cs, x_prevs)):
         single = one(c, x_prev)
         for name in single._fields:
+            if getattr(single, name) is None:  # aux, unused here
+                continue
             np.testing.assert_array_equal(getattr(batched, name)[i], getattr(single, name))
     ok = batched.status == RootStatus.ok
     assert bool(jnp.all(ok == (jnp.abs(cs) <= 1.0)))

@@ -115,3 +115,12 @@ def test_paper_scale_deep_impact(paper_scale):
     assert 3.0 <= los["dv_mean_mps"] <= 10.0
     assert los["firings_max"] <= 10
     assert pred["miss_rms_m"] > los["miss_rms_m"]
+
+
+def test_new_gains_reuse_the_compiled_study():
+    base = gj.load_scenario("deep-impact-los", overrides=SHORT)
+    a = gj.run_study(base, runs=4, seed=0, progress=False)
+    b = gj.run_study(base.with_overrides({"guidance.k1": 2.5}), runs=4, seed=0, progress=False)
+    assert b.compile_s == 0.0  # gains are arguments of the executable, not constants
+    assert not np.allclose(a.outcomes["dv_mps"], b.outcomes["dv_mps"])
+    np.testing.assert_allclose(a.outcomes["delivery_error_m"], b.outcomes["delivery_error_m"])

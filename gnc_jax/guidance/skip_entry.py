@@ -1,0 +1,354 @@
+"""Combined skip-entry guidance of a lunar-return capsule (seed 003; SPEC §8) — "the capsule law".
+
+Phases (seed 003 §2, Fig. 1):
+
+0. *hold*: the de-orbit attitude is held until the sensed load exceeds ``ng0``;
+1. *first entry*: numerical predictor-corrector. Every ``pc_period`` the predictor integrates
+   the vertical-plane dynamics with the bank profile |sigma|(v) = sigma_0 + (sigma_f - sigma_0)
+   (v_0 - v)/(v_0 - v_sw), linear in Earth-relative speed from the current speed v_0 to the
+   reference switch speed v_sw, only up to the second-entry (switch) point, and adds the
+   second-entry range by the first-order expansion of eq. 10 around the stored reference. The
+   corrector (eqs. 11-15) solves for sigma_0 with the bounded regula falsi of
+   :mod:`gnc_jax.root_finding`, a fixed-iteration ``lax`` loop;
+2. *Kepler*: after the pull-up, while N_g < 0.2 g (no guidance: the command is held);
+3. *second entry*: reference-trajectory tracking, cos sigma_c = [(L/D)_0 cos sigma_0 + K.Delta]
+   / (L/D) (eq. 6 without its repeated K.Delta, a typo) with the feedback of eq. 7 on the drag
+   load N_gx, Ḣ, the range to go S and its rate; the reference bank profile is corrected once
+   at the switch point by eqs. 16-17 (switch-point compensation).
+
+The sign of the bank follows bank reversals inside a crossrange funnel that narrows with speed.
+Phase changes are hard logic (evaluation); gradients of the tracking gains flow through the
+second entry, which has no discrete logic apart from the reversals.
+"""
+
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._types import Array, Float, Scalar
+from ..dynamics.entry import EntryState
+from ..geometry.sphere import (
+    along_cross_track,
+    crossrange_to_target,
+    to_earth_fixed,
+    to_inertial,
+    unit,
+)
+from ..integrate import rk4_step
+from ..root_finding import bounded_regula_falsi
+from .entry_common import EntryModel, FlightVariables, flight_variables, hermite_crossing
+
+
+class ReferenceTrajectory(eqx.Module):
+    """Second-entry reference stored against Earth-relative speed (decreasing grid).
+
+    Attributes:
+        velocity_mps: table abscissa (decreasing from the switch speed).
+        bank_rad, range_to_go_m, hdot_mps, drag_load_g, range_rate_mps: reference values.
+        switch_*: nominal switch (second-entry) state; second_entry_range_m: S_std2.
+        d_range_d_switch: dS2/d(speed, flight-path angle, altitude) (m/(m/s), m/rad, m/m).
+        d_range_d_bank: dS2/d(uniform bank offset), m/rad.
+        first_entry_bank_rad: nominal first-entry bank (the end value sigma_f of the
+            predictor-corrector profile).
+        sigma_a_rad, sigma_b_rad, v_end_mps: the designed linear profile.
+        range_per_*: sensitivities of the remaining reference range to the drag load (m/g),
+            to Ḣ (m per m/s) and to a uniform change of cos(sigma) (m), and the reference
+            time to go (s): the velocity-scheduled gain vectors of eq. 7.
+    """
+
+    velocity_mps: Float[Array, " n"]
+    bank_rad: Float[Array, " n"]
+    range_to_go_m: Float[Array, " n"]
+    hdot_mps: Float[Array, " n"]
+    drag_load_g: Float[Array, " n"]
+    range_rate_mps: Float[Array, " n"]
+    switch_velocity_mps: Scalar
+    switch_fpa_rad: Scalar
+    switch_altitude_m: Scalar
+    switch_time_s: Scalar
+    second_entry_range_m: Scalar
+    d_range_d_switch: Float[Array, "3"]
+    d_range_d_bank: Scalar
+    first_entry_bank_rad: Scalar
+    sigma_a_rad: Scalar
+    sigma_b_rad: Scalar
+    v_end_mps: Scalar
+    range_per_drag_load_m: Float[Array, " n"]
+    range_per_hdot_s: Float[Array, " n"]
+    range_per_cos_bank_m: Float[Array, " n"]
+    time_to_go_s: Float[Array, " n"]
+
+    def sensitivities(self, speed):
+        """(dR/dN_gx, dR/dḢ, dR/dcos sigma, time to go) of the reference at ``speed``."""
+        xp = self.velocity_mps[::-1]
+
+        def f(table):
+            return jnp.interp(speed, xp, table[::-1])
+
+        return (
+            f(self.range_per_drag_load_m),
+            f(self.range_per_hdot_s),
+            f(self.range_per_cos_bank_m),
+            f(self.time_to_go_s),
+        )
+
+    def lookup(self, speed):
+        """(bank, range to go, Ḣ, N_gx, Ṡ) of the reference at ``speed`` (clamped)."""
+        xp = self.velocity_mps[::-1]
+
+        def f(table):
+            return jnp.interp(speed, xp, table[::-1])
+
+        return (
+            f(self.bank_rad),
+            f(self.range_to_go_m),
+            f(self.hdot_mps),
+            f(self.drag_load_g),
+            f(self.range_rate_mps),
+        )
+
+    def second_entry_range(self, fv: FlightVariables) -> Scalar:
+        """Seed 003 eq. 10: S2 = S_std2 + dF/dv dv + dF/dtheta dtheta + dF/dH dH, m."""
+        delta = jnp.stack(
+            [
+                fv.speed_mps - self.switch_velocity_mps,
+                fv.fpa_rad - self.switch_fpa_rad,
+                fv.altitude_m - self.switch_altitude_m,
+            ]
+        )
+        return self.second_entry_range_m + jnp.dot(self.d_range_d_switch, delta)
+
+
+class Prediction(NamedTuple):
+    """Outcome of one predictor run. The crossrange at the switch point includes the drift the
+    rotating Earth adds under the Kepler arc, which the first-entry bank reversals use."""
+
+    miss_m: Scalar  # predicted range error (> 0 overshoot)
+    crossrange_m: Scalar  # crossrange to the target at the end point (> 0 target on the left)
+    kind: Array  # 0 switch point reached, 1 chute reached without skip, 2 skip-out/time-out
+    steps: Array  # integration steps used
+
+
+class SkipEntryGuidance(eqx.Module):
+    """The combined predictor-corrector / reference-trajectory law of seed 003.
+
+    Gains and thresholds are array leaves (differentiable); loop sizes are static.
+
+    Attributes:
+        reference: the designed second-entry reference.
+        k_drag_load, k_hdot, k_range, k_range_rate: dimensionless multipliers of the
+            speed-scheduled gain vector of eq. 7 (see :meth:`feedback_gains`).
+        ng0_g: load that starts guidance (end of the attitude hold).
+        kepler_load_g: Kepler-phase threshold, 0.2 g in the seed.
+        bracket_step_rad: Δσ of eq. 15; range_tolerance_m: corrector tolerance on |ΔS|.
+        bank_min_rad, bank_max_rad: corrector bounds.
+        skip_out_altitude_m: a prediction climbing above it counts as a skip-out.
+        funnel_base_m, funnel_quadratic_s2_m: crossrange funnel: the bank reverses when the
+            crossrange to the target exceeds base + quadratic * speed^2 (m), which narrows
+            with speed like the lateral reach of the lift (second entry).
+        switch_crossrange_m: first-entry reversal threshold on the crossrange *predicted at
+            the switch point* (which includes the drift of the rotating Earth under the
+            Kepler arc), so that the second entry starts close to the target's plane.
+        track_bank_min_rad: smallest bank magnitude (and largest, pi minus it) the second
+            entry commands: a lift vector held straight up or down has no lateral component.
+        chute_altitude_m: end of guidance.
+    """
+
+    reference: ReferenceTrajectory
+    k_drag_load: Scalar
+    k_hdot: Scalar
+    k_range: Scalar
+    k_range_rate: Scalar
+    ng0_g: Scalar
+    kepler_load_g: Scalar
+    bracket_step_rad: Scalar
+    range_tolerance_m: Scalar
+    bank_min_rad: Scalar
+    bank_max_rad: Scalar
+    skip_out_altitude_m: Scalar
+    funnel_base_m: Scalar
+    funnel_quadratic_s2_m: Scalar
+    switch_crossrange_m: Scalar
+    track_bank_min_rad: Scalar
+    chute_altitude_m: Scalar
+    predictor_dt_s: float = eqx.field(static=True, default=2.0)
+    predictor_max_steps: int = eqx.field(static=True, default=1000)
+    n_bracket: int = eqx.field(static=True, default=6)
+    n_iter: int = eqx.field(static=True, default=6)
+
+    # ---- predictor (seed 003 §3.1) ----
+    def profile(self, sigma_0, v_0, speed):
+        """|sigma|(v) of the first entry: linear in speed from sigma_0 at v_0 to sigma_f."""
+        v_sw = self.reference.switch_velocity_mps
+        span = jnp.maximum(v_0 - v_sw, 1.0)
+        s = jnp.clip((v_0 - speed) / span, 0.0, 1.0)
+        return sigma_0 + (self.reference.first_entry_bank_rad - sigma_0) * s
+
+    def predict(
+        self, y: EntryState, t, pulled_up, sigma_0, model: EntryModel, target_fixed, active=True
+    ) -> Prediction:
+        """Predicted range error of the bank profile ``sigma_0`` (seed 003 §3.1), m.
+
+        Integrates the vertical-plane dynamics (RK4, ``predictor_dt_s``) from ``(y, t)`` with
+        the first-entry profile. The prediction normally stops at the switch point — the end of
+        the Kepler phase: after the pull-up the load fell below ``kepler_load_g`` and has just
+        risen above it again — and returns S2(eq. 10 at the switch state) minus the range
+        from the switch point to the target. A skip too shallow to reach the Kepler phase has
+        no such point: from its apogee the prediction flies the reference bank profile down to
+        the chute and returns the signed along-track miss of the chute point; so does a
+        prediction that never pulls up. A climb above ``skip_out_altitude_m`` or running out
+        of steps returns a large overshoot. Under ``vmap`` the ``while_loop`` runs while one
+        active run still integrates; an inactive run does no step.
+        """
+        earth = model.earth
+        dt = self.predictor_dt_s
+        v_0 = flight_variables(y, earth).speed_mps
+
+        class C(NamedTuple):
+            y: EntryState
+            t: Scalar
+            pulled_up: Array
+            kepler: Array
+            second: Array
+            ng: Scalar
+            kind: Array  # -1 running
+            k: Array
+            y_end: EntryState
+            t_end: Scalar
+
+        def cond(c):
+            return (c.kind < 0) & (c.k < self.predictor_max_steps)
+
+        def body(c):
+            fv = flight_variables(c.y, earth)
+            bank = jnp.where(
+                c.second,
+                self.reference.lookup(fv.speed_mps)[0],
+                self.profile(sigma_0, v_0, fv.speed_mps),
+            )
+            y1 = rk4_step(model.vertical_plane_field, c.t, c.y, dt, jnp.cos(bank))
+            fv1 = flight_variables(y1, earth)
+            ng1 = model.load_g(y1)
+            pulled = c.pulled_up | (fv1.hdot_mps > 0.0)
+            kepler = c.kepler | (pulled & (ng1 < self.kepler_load_g))
+            descending = pulled & (fv1.hdot_mps < 0.0) & (ng1 >= self.kepler_load_g)
+            switch = kepler & descending
+            second = c.second | (~kepler & descending)
+            chute = fv1.altitude_m < self.chute_altitude_m
+            skip = fv1.altitude_m > self.skip_out_altitude_m
+            # switch point: linear interpolation of the load crossing inside the step
+            s_sw = jnp.clip(
+                (self.kepler_load_g - c.ng) / jnp.where(ng1 != c.ng, ng1 - c.ng, 1.0), 0.0, 1.0
+            )
+            s_ch = hermite_crossing(
+                fv.altitude_m, fv.hdot_mps, fv1.altitude_m, fv1.hdot_mps, dt, self.chute_altitude_m
+            )
+            s = jnp.where(switch, s_sw, s_ch)
+            y_end = jax.tree_util.tree_map(lambda a, b: a + s * (b - a), c.y, y1)
+            kind = jnp.where(switch, 0, jnp.where(chute, 1, jnp.where(skip, 2, -1)))
+            return C(y1, c.t + dt, pulled, kepler, second, ng1, kind, c.k + 1, y_end, c.t + s * dt)
+
+        f = jnp.asarray(False)
+        c0 = C(
+            y,
+            jnp.asarray(t, float),
+            jnp.asarray(pulled_up),
+            f,
+            f,
+            model.load_g(y),
+            jnp.where(active, -1, 3),
+            jnp.asarray(0),
+            y,
+            jnp.asarray(t, float),
+        )
+        c = jax.lax.while_loop(cond, body, c0)
+        kind = jnp.where(c.kind < 0, 2, c.kind)  # out of steps: treat as a skip-out
+        r_e = earth.equatorial_radius_m
+        # Signed along-track position of the end point relative to the target, on the great
+        # circle from here to the target (> 0 beyond it): a long skip that passes over the
+        # target must count as an overshoot, which an unsigned distance would not.
+        here = unit(to_earth_fixed(y.r, t, earth.rotation_rate))
+        end = unit(to_earth_fixed(c.y_end.r, c.t_end, earth.rotation_rate))
+        beyond = r_e * along_cross_track(end, here, target_fixed)[0]
+        s2 = self.reference.second_entry_range(flight_variables(c.y_end, earth))
+        overshoot = 2.0 * self.reference.range_to_go_m[0] + 1.0e7
+        miss = jnp.where(kind == 0, s2 + beyond, jnp.where(kind == 1, beyond, overshoot))
+        target = to_inertial(target_fixed, c.t_end, earth.rotation_rate)
+        v_rel = c.y_end.v - jnp.cross(earth.angular_velocity(), c.y_end.r)
+        chi = r_e * crossrange_to_target(c.y_end.r, v_rel, target)
+        return Prediction(miss, chi, kind, c.k)
+
+    def correct(self, y, t, pulled_up, sigma_prev, model, target_fixed, enabled):
+        """Bounded regula falsi on sigma_0 (seed 003 eqs. 11-15), a fixed-iteration loop.
+
+        The result's ``aux`` is the predicted crossrange at the switch point of the solution,
+        its ``cost`` the number of predictor RK4 steps taken by all predictions of the cycle."""
+
+        def miss(sigma_0, active):
+            p = self.predict(y, t, pulled_up, sigma_0, model, target_fixed, active)
+            return p.miss_m, p.crossrange_m, p.steps.astype(float)
+
+        return bounded_regula_falsi(
+            miss,
+            sigma_prev,
+            self.bracket_step_rad,
+            self.bank_min_rad,
+            self.bank_max_rad,
+            self.range_tolerance_m,
+            self.n_bracket,
+            self.n_iter,
+            illinois=True,
+            decreasing=True,
+            enabled=enabled,
+            pass_active=True,
+            has_aux=True,
+            has_cost=True,
+        )
+
+    # ---- reference tracking (seed 003 §2.2, eqs. 6-7, 16-17) ----
+    def switch_compensation(self, fv: FlightVariables, range_to_go_m) -> Scalar:
+        """Bank offset (rad) at the switch point (eqs. 16-17, signs made consistent): the
+        offset that makes the expanded second-entry range equal the actual range to go."""
+        s2 = self.reference.second_entry_range(fv)
+        return (range_to_go_m - s2) / self.reference.d_range_d_bank
+
+    def feedback_gains(self, speed):
+        """Gain vector K(v) of eq. 7 on (ΔN_gx, ΔḢ, ΔS, ΔṠ), per g, s/m, 1/m, s/m.
+
+        The gains are scheduled with speed from the reference's own range sensitivities (as
+        Apollo's final phase does): the range the current deviations will add,
+        ΔR = dR/dN ΔN_gx + dR/dḢ ΔḢ - t_go ΔṠ, is compared with the range to go deviation ΔS,
+        and the difference is removed with cos sigma through dR/dcos. The four leaves
+        ``k_range`` (overall gain on ΔS - ΔR) and ``k_drag_load``, ``k_hdot``, ``k_range_rate``
+        (weights of the predicted-range terms) are dimensionless multipliers (1 = nominal).
+        """
+        f_drag, f_hdot, f_cos, t_go = self.reference.sensitivities(speed)
+        f_cos = jnp.maximum(f_cos, 1.0e3)  # no authority left near the chute: bounded gains
+        k = self.k_range / f_cos
+        return jnp.stack(
+            [
+                -k * self.k_drag_load * f_drag,
+                -k * self.k_hdot * f_hdot,
+                k,
+                k * self.k_range_rate * t_go,
+            ]
+        )
+
+    def track(self, speed, drag_load, hdot, range_to_go, range_rate, ld_ratio, bank_offset):
+        """Commanded bank magnitude (rad) of the second entry (eqs. 6-7).
+
+        ``ld_ratio``: measured L/D over the reference (L/D)_0."""
+        ref_bank, ref_s, ref_hdot, ref_ngx, ref_sdot = self.reference.lookup(speed)
+        delta = jnp.stack(
+            [drag_load - ref_ngx, hdot - ref_hdot, range_to_go - ref_s, range_rate - ref_sdot]
+        )
+        k_delta = jnp.dot(self.feedback_gains(speed), delta)
+        cos_cmd = (jnp.cos(ref_bank + bank_offset) + k_delta) / ld_ratio
+        # keep a minimum bank so that the lateral channel never loses all its authority
+        lim = jnp.cos(self.track_bank_min_rad)
+        return jnp.arccos(jnp.clip(cos_cmd, -lim, lim))
+
+    def funnel_m(self, speed):
+        return self.funnel_base_m + self.funnel_quadratic_s2_m * speed**2

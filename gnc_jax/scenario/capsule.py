@@ -1,0 +1,218 @@
+"""Scenario fields of the lunar-return skip entry (seed 003 Tables 1-2; SPEC §8).
+
+File units follow the paper (km, km/s, deg, %, 3-sigma dispersions); the simulation is SI.
+"""
+
+from .schema import Field, ScenarioError
+
+F = Field
+
+SCHEMA = {
+    "entry": {
+        "altitude_km": F("float", 120.0, lo=50.0, hi=500.0, units="km"),
+        "speed_kmps": F(
+            "float", 11.0, lo=5.0, hi=20.0, units="km/s", doc="Earth-relative entry speed"
+        ),
+        "fpa_deg": F("float", -5.9, lo=-30.0, hi=0.0, units="deg", doc="Earth-relative"),
+        "azimuth_deg": F(
+            "float", 34.3, lo=-360.0, hi=360.0, units="deg", doc="heading, clockwise from north"
+        ),
+        "longitude_deg": F("float", 63.54, lo=-360.0, hi=360.0, units="deg"),
+        "latitude_deg": F("float", -3.34, lo=-90.0, hi=90.0, units="deg", doc="geocentric"),
+        "range_km": F(
+            "float",
+            8000.0,
+            lo=500.0,
+            hi=20000.0,
+            units="km",
+            doc="great-circle range from the entry point to the target",
+        ),
+        "chute_altitude_km": F("float", 10.0, lo=1.0, hi=40.0, units="km"),
+    },
+    "vehicle": {
+        "mass_kg": F("float", 9000.0, lo=0.0, lo_open=True, hi=1e6, units="kg"),
+        "area_m2": F("float", 22.0, lo=0.0, lo_open=True, hi=1e3, units="m^2"),
+        "cl": F("float", 0.39, lo=0.0, lo_open=True, hi=5.0, doc="trim lift coefficient"),
+        "cd": F("float", 1.3, lo=0.0, lo_open=True, hi=5.0, doc="trim drag coefficient"),
+        "nose_radius_m": F("float", 6.35, lo=0.0, lo_open=True, hi=100.0, units="m"),
+    },
+    "atmosphere": {
+        "model": F("str", "us76", choices=("us76", "exponential")),
+        "rho0_kgm3": F(
+            "float",
+            1.225,
+            lo=0.0,
+            lo_open=True,
+            hi=100.0,
+            units="kg/m^3",
+            doc="exponential model only",
+        ),
+        "scale_height_km": F(
+            "float", 7.2, lo=0.1, hi=100.0, units="km", doc="exponential model only"
+        ),
+    },
+    "actuator": {
+        "max_rate_dps": F("float", 20.0, lo=0.0, lo_open=True, hi=360.0, units="deg/s"),
+        "max_accel_dps2": F("float", 10.0, lo=0.0, lo_open=True, hi=3600.0, units="deg/s^2"),
+    },
+    "dispersions": {  # 3-sigma, seed 003 Table 2
+        "speed_mps": F("float", 100.0, lo=0.0, hi=2000.0, units="m/s"),
+        "fpa_deg": F("float", 0.2, lo=0.0, hi=5.0, units="deg"),
+        "heading_deg": F("float", 0.5, lo=0.0, hi=10.0, units="deg"),
+        "downrange_km": F("float", 100.0, lo=0.0, hi=2000.0, units="km"),
+        "altitude_km": F("float", 1.0, lo=0.0, hi=50.0, units="km"),
+        "crossrange_km": F("float", 100.0, lo=0.0, hi=2000.0, units="km"),
+        "cl_pct": F("float", 20.0, lo=0.0, hi=90.0, units="%"),
+        "cd_pct": F("float", 20.0, lo=0.0, hi=90.0, units="%"),
+        "density_pct": F("float", 30.0, lo=0.0, hi=90.0, units="%"),
+        "mass_pct": F(
+            "float", 5.0, lo=0.0, hi=50.0, units="%", doc="uniform half-width (not 3-sigma)"
+        ),
+    },
+    "guidance": {
+        "ng0_g": F(
+            "float",
+            0.1,
+            lo=0.0,
+            lo_open=True,
+            hi=5.0,
+            units="g",
+            doc="load that ends the attitude hold",
+        ),
+        "kepler_load_g": F("float", 0.2, lo=0.0, lo_open=True, hi=5.0, units="g"),
+        "hold_bank_deg": F("float", 60.0, lo=0.0, hi=180.0, units="deg"),
+        "pc_period_s": F(
+            "float",
+            4.0,
+            lo=0.0,
+            lo_open=True,
+            hi=120.0,
+            units="s",
+            doc="predictor-corrector cycle; a multiple of simulation.control_dt_s",
+        ),
+        "predictor_dt_s": F(
+            "float",
+            4.0,
+            lo=0.01,
+            hi=60.0,
+            units="s",
+            doc="RK4 step of the predictor (see benchmarks/entry_integrators.py)",
+        ),
+        "predictor_max_steps": F("int", 1000, lo=10, hi=100000),
+        "bracket_step_deg": F("float", 5.0, lo=0.01, hi=90.0, units="deg", doc="Δσ of eq. 15"),
+        "n_bracket": F("int", 6, lo=1, hi=100),
+        "n_iter": F("int", 6, lo=1, hi=100),
+        "range_tolerance_km": F(
+            "float",
+            5.0,
+            lo=0.001,
+            hi=1000.0,
+            units="km",
+            doc="corrector tolerance on the predicted range error",
+        ),
+        "bank_min_deg": F("float", 0.0, lo=0.0, hi=180.0, units="deg"),
+        "bank_max_deg": F("float", 180.0, lo=0.0, hi=180.0, units="deg"),
+        "skip_out_altitude_km": F("float", 300.0, lo=130.0, hi=1e5, units="km"),
+        "k_range": F(
+            "float",
+            1.5,
+            lo=0.0,
+            hi=100.0,
+            doc="eq. 7: overall gain on the range deviation (1 = dead-beat)",
+        ),
+        "k_drag_load": F(
+            "float",
+            1.0,
+            lo=0.0,
+            hi=100.0,
+            doc="eq. 7: weight of the drag-load term of the predicted range",
+        ),
+        "k_hdot": F(
+            "float", 1.0, lo=0.0, hi=100.0, doc="eq. 7: weight of the Ḣ term of the predicted range"
+        ),
+        "k_range_rate": F(
+            "float",
+            0.5,
+            lo=0.0,
+            hi=100.0,
+            doc="eq. 7: weight of the range-rate term of the predicted range",
+        ),
+        "track_bank_min_deg": F(
+            "float",
+            15.0,
+            lo=0.0,
+            hi=89.0,
+            units="deg",
+            doc="second entry: smallest commanded bank magnitude",
+        ),
+        "switch_crossrange_km": F(
+            "float",
+            40.0,
+            lo=0.0,
+            hi=1e3,
+            units="km",
+            doc="first-entry reversal threshold on the crossrange predicted at the switch point",
+        ),
+        "funnel_base_km": F("float", 0.5, lo=0.0, hi=1e3, units="km"),
+        "funnel_quadratic_km": F(
+            "float",
+            1.2,
+            lo=0.0,
+            hi=1e3,
+            units="km/(km/s)^2",
+            doc="funnel half-width = base + quadratic * speed^2",
+        ),
+        "ratio_filter_gain": F(
+            "float", 0.2, lo=0.0, hi=1.0, doc="fading-memory gain of the drag/lift ratio estimates"
+        ),
+    },
+    "reference": {
+        "v_end_mps": F(
+            "float",
+            1000.0,
+            lo=100.0,
+            hi=7000.0,
+            units="m/s",
+            doc="end speed of the linear second-entry bank profile",
+        ),
+        "w_margin": F(
+            "float",
+            2.0,
+            lo=0.0,
+            hi=1e3,
+            doc="weight of the control-margin term of the design objective",
+        ),
+        "design_steps": F("int", 20, lo=1, hi=1000, doc="optax Adam steps of the design"),
+    },
+    "simulation": {
+        "dt_s": F("float", 0.5, lo=0.01, hi=10.0, units="s", doc="truth RK4 step"),
+        "control_dt_s": F(
+            "float", 1.0, lo=0.01, hi=10.0, units="s", doc="guidance step; a multiple of dt_s"
+        ),
+        "max_time_s": F("float", 2400.0, lo=10.0, hi=1e5, units="s"),
+    },
+}
+
+
+def _multiple(a, b):
+    r = a / b
+    return abs(r - round(r)) < 1e-9 and round(r) >= 1
+
+
+def check(cfg: dict) -> None:
+    """Cross-field checks of a validated capsule configuration."""
+    g, s = cfg["guidance"], cfg["simulation"]
+    if g["bank_min_deg"] >= g["bank_max_deg"]:
+        raise ScenarioError("guidance.bank_min_deg: must be < guidance.bank_max_deg")
+    if not _multiple(s["control_dt_s"], s["dt_s"]):
+        raise ScenarioError(
+            f"simulation.control_dt_s: {s['control_dt_s']:g} s; allowed: a whole multiple of "
+            f"simulation.dt_s = {s['dt_s']:g} s"
+        )
+    if not _multiple(g["pc_period_s"], s["control_dt_s"]):
+        raise ScenarioError(
+            f"guidance.pc_period_s: {g['pc_period_s']:g} s; allowed: a whole multiple of "
+            f"simulation.control_dt_s = {s['control_dt_s']:g} s"
+        )
+    if g["kepler_load_g"] <= 0 or g["ng0_g"] <= 0:
+        raise ScenarioError("guidance.ng0_g: allowed: > 0")
