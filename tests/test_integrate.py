@@ -51,3 +51,24 @@ def test_straight_line_with_constant_thrust_is_exact():
     y = propagate(dyn, y0, thrust, 0.0, 30.0, 1)
     np.testing.assert_allclose(np.asarray(y.r), [1e7 - 3e5, 0.0, 0.5 * 0.1 * 900.0], rtol=1e-14)
     assert jax.numpy.isfinite(y.m)
+
+
+@pytest.mark.parametrize("tableau", ["rk4", "rk6"])
+def test_convergence_order_of_the_tableaus(tableau):
+    """Observed order on a smooth nonlinear problem (Kepler orbit) vs the closed form."""
+    from gnc_jax.integrate import RK4, RK6_BUTCHER, integrate_fixed
+
+    tab = {"rk4": RK4, "rk6": RK6_BUTCHER}[tableau]
+
+    def f(t, y, args):
+        r = y[:2]
+        return jnp.concatenate([y[2:], -r / jnp.linalg.norm(r) ** 3])
+
+    y0 = jnp.array([1.0, 0.0, 0.0, 1.0])  # circular orbit, period 2 pi
+    exact = np.array([np.cos(3.0), np.sin(3.0)])
+    errs = []
+    for n in (40, 80):
+        y = integrate_fixed(f, 0.0, y0, 3.0 / n, n, tableau=tab)
+        errs.append(np.linalg.norm(np.asarray(y[:2]) - exact))
+    order = np.log2(errs[0] / errs[1])
+    assert order == pytest.approx(tab.order, abs=0.35)
