@@ -92,7 +92,7 @@ SCHEMA = {
         ),
         "predictor_dt_s": F(
             "float",
-            4.0,
+            8.0,
             lo=0.01,
             hi=60.0,
             units="s",
