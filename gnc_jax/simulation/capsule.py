@@ -224,7 +224,6 @@ def simulate(sim: CapsuleSimulation, law: SkipEntryGuidance, key: PRNGKeyArray, 
     """One closed-loop skip entry. Returns ``(CapsuleOutcome, Trace | None)``."""
     earth = sim.earth
     y0, vehicle, atmosphere, draws = dispersed_entry(sim, key)
-    entry_fixed = unit(to_earth_fixed(y0.r, 0.0, earth.rotation_rate))
     nominal_start = unit(entry_state_from_conditions(sim.entry, earth).r)
     truth_args = lambda bank: EntryArgs(vehicle, earth, atmosphere, bank)  # noqa: E731
     c_l0, c_d0 = sim.vehicle.c_l, sim.vehicle.c_d
@@ -476,7 +475,6 @@ def simulate(sim: CapsuleSimulation, law: SkipEntryGuidance, key: PRNGKeyArray, 
 
     u_chute = unit(to_earth_fixed(c.chute.r, c.t_chute, earth.rotation_rate))
     along, cross = along_cross_track(u_chute, nominal_start, sim.target_fixed)
-    del entry_fixed
     r_e_km = earth.equatorial_radius_m / 1e3
     outcome = CapsuleOutcome(
         status=jnp.zeros((), jnp.int32),
