@@ -21,7 +21,7 @@ from jax.sharding import Mesh, PartitionSpec
 
 from ._status import Status
 from .scenario import Scenario, ScenarioError
-from .simulation import capsule, impactor
+from .simulation import capsule, impactor, midcourse
 
 
 @dataclasses.dataclass(frozen=True)
@@ -35,6 +35,7 @@ class System:
 SYSTEMS: dict[str, System] = {
     "impactor": System(impactor.build, impactor.simulate),
     "capsule": System(capsule.build, capsule.simulate),
+    "midcourse": System(midcourse.build, midcourse.simulate),
 }
 
 

@@ -24,6 +24,20 @@ LABELS = {
     "predictions_max": "predictions/traj max",
     "cycle_predictions_max_mean": "max per cycle, mean",
     "cycle_predictions_max": "max per cycle, max",
+    "b_err_km_rms": "|ΔB| RMS (km)",
+    "b_err_km_max": "|ΔB| max (km)",
+    "tof_err_s_rms": "|Δt_TOF| RMS (s)",
+    "tof_err_s_max": "|Δt_TOF| max (s)",
+    "goal_met_pct": "goal met (% runs)",
+    "corrections_mean": "corrections mean",
+    "dv_increase_pct_mean": "Δv increase (%)",
+    "dv_first_mean_mps": "first Δv (m/s)",
+    "later_dv_below_0p2_pct": "later Δv < 0.2 m/s (%)",
+    "correction_every_fix_pct": "burn every fix (% runs)",
+    "iterations_mean": "Newton iterations mean",
+    "b0_err_km_rms": "|ΔB| no guidance RMS (km)",
+    "b0_err_r_km_std": "ΔB_R no guidance 1σ (km)",
+    "b0_err_t_km_std": "ΔB_T no guidance 1σ (km)",
 }
 
 

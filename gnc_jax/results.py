@@ -92,7 +92,46 @@ def _capsule_stats(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
     return out
 
 
-STATS = {"impactor": _impactor_stats, "capsule": _capsule_stats}
+def _midcourse_stats(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
+    if not ok.any():
+        return {}
+    rms = lambda x: float(np.sqrt(np.mean(x**2)))
+    b, tof = o["b_err_m"][ok] / 1e3, np.abs(o["tof_err_s"][ok])
+    b0, tof0 = o["b0_err_m"][ok] / 1e3, np.abs(o["tof0_err_s"][ok])
+    dv, count = o["dv_mps"][ok], o["corrections"][ok]
+    per_fix = o["dv_per_fix_mps"][ok]
+    later = per_fix[:, 1:][per_fix[:, 1:] > 0.0]
+    return dict(
+        b_err_km_rms=rms(b),
+        b_err_km_max=float(np.max(b)),
+        tof_err_s_rms=rms(tof),
+        tof_err_s_max=float(np.max(tof)),
+        dv_mean_mps=float(np.mean(dv)),
+        corrections_mean=float(np.mean(count)),
+        goal_met=int(np.sum(o["goal_met"][ok])),
+        goal_met_pct=float(100.0 * np.mean(o["goal_met"][ok])),
+        b_err_r_km_std=float(np.std(o["b_err_r_m"][ok] / 1e3)),
+        b_err_t_km_std=float(np.std(o["b_err_t_m"][ok] / 1e3)),
+        tof_err_s_std=float(np.std(o["tof_err_s"][ok])),
+        b0_err_km_rms=rms(b0),
+        b0_err_km_max=float(np.max(b0)),
+        b0_err_r_km_std=float(np.std(o["b0_err_r_m"][ok] / 1e3)),
+        b0_err_t_km_std=float(np.std(o["b0_err_t_m"][ok] / 1e3)),
+        tof0_err_s_rms=rms(tof0),
+        dv_max_mps=float(np.max(dv)),
+        dv_first_mean_mps=float(np.mean(o["dv_first_mps"][ok])),
+        dv_ref_mean_mps=float(np.mean(o["dv_ref_mps"][ok])),
+        dv_increase_pct_mean=float(np.mean(o["dv_increase_pct"][ok])),
+        later_dv_max_mps=float(np.max(later)) if later.size else 0.0,
+        later_dv_below_0p2_pct=float(100.0 * np.mean(later < 0.2)) if later.size else 0.0,
+        corrections_max=int(np.max(count)),
+        correction_every_fix_pct=float(100.0 * np.mean(count == per_fix.shape[1])),
+        iterations_mean=float(np.mean(o["iterations"][ok][count > 0])) if np.any(count) else 0.0,
+        ground_calls_total=int(np.sum(o["ground_calls"][ok])),
+    )
+
+
+STATS = {"impactor": _impactor_stats, "capsule": _capsule_stats, "midcourse": _midcourse_stats}
 
 
 def summarize(study) -> dict[str, Any]:

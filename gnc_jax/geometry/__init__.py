@@ -8,6 +8,7 @@ from .ellipse import (
     map_covariance,
     mean_position_error,
 )
+from .hyperbola import HyperbolicBPlane, b_plane_hyperbolic, check_hyperbolic_b_plane
 from .los import los_frame, los_rate, range_rate, time_to_go, unforced_miss, zero_effort_miss
 
 __all__ = [
@@ -26,4 +27,7 @@ __all__ = [
     "time_to_go",
     "unforced_miss",
     "zero_effort_miss",
+    "HyperbolicBPlane",
+    "b_plane_hyperbolic",
+    "check_hyperbolic_b_plane",
 ]

@@ -3,6 +3,7 @@
 from .base import AbstractImpactorGuidance, EngineCommand, ImpactorGuidanceContext
 from .los import LOSGuidanceState, LOSSwitchingCurveGuidance, switching_curve
 from .predictive import PredictiveGuidance, PredictiveGuidanceState
+from .targeting import AutonomousCorrection, NewtonTargeter, TargetingResult, solve_linear_targeting
 
 __all__ = [
     "AbstractImpactorGuidance",
@@ -13,4 +14,8 @@ __all__ = [
     "switching_curve",
     "PredictiveGuidance",
     "PredictiveGuidanceState",
+    "AutonomousCorrection",
+    "NewtonTargeter",
+    "TargetingResult",
+    "solve_linear_targeting",
 ]

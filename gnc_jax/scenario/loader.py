@@ -7,11 +7,11 @@ import pathlib
 import tomllib
 from typing import Any
 
-from . import capsule, impactor
+from . import capsule, impactor, midcourse
 from .schema import ScenarioError, parse_override, validate
 
 #: scenario kind -> module with ``SCHEMA`` and ``check(config)``
-KINDS = {"impactor": impactor, "capsule": capsule}
+KINDS = {"impactor": impactor, "capsule": capsule, "midcourse": midcourse}
 
 _META_FIELDS = {"name", "kind", "description", "reference", "runs", "seed"}
 

@@ -1,6 +1,6 @@
 """Closed-loop simulators, one module per system, each written for a single trajectory."""
 
-from . import impactor
+from . import impactor, midcourse
 from .impactor import (
     ImpactorErrors,
     ImpactorOutcome,
@@ -10,6 +10,8 @@ from .impactor import (
 from .impactor import (
     simulate as simulate_impactor,
 )
+from .midcourse import FixRecord, MidcourseErrors, MidcourseOutcome, MidcourseSimulation
+from .midcourse import simulate as simulate_midcourse
 
 __all__ = [
     "impactor",
@@ -18,4 +20,10 @@ __all__ = [
     "ImpactorSimulation",
     "StepRecord",
     "simulate_impactor",
+    "midcourse",
+    "FixRecord",
+    "MidcourseErrors",
+    "MidcourseOutcome",
+    "MidcourseSimulation",
+    "simulate_midcourse",
 ]
