@@ -6,6 +6,7 @@ anything is compiled, and every error is one line naming the field and what is a
 """
 
 import dataclasses
+import datetime
 import math
 from typing import Any
 
@@ -43,7 +44,9 @@ class Field:
         if self.kind == "bool":
             return "true or false"
         if self.kind == "str":
-            return "one of " + ", ".join(repr(c) for c in self.choices or ())
+            if not self.choices:
+                return "text" + (f" ({self.doc})" if self.doc else "")
+            return "one of " + ", ".join(repr(c) for c in self.choices)
         lo = "-inf" if self.lo is None else f"{self.lo:g}"
         hi = "inf" if self.hi is None else f"{self.hi:g}"
         rng = f"{'(' if self.lo_open else '['}{lo}, {hi}]"
@@ -80,6 +83,8 @@ class Field:
                 fail(f"expected true or false, got {value!r}")
             return value
         if self.kind == "str":
+            if isinstance(value, (datetime.date, datetime.time)):
+                value = value.isoformat()  # an unquoted TOML date in a text field
             if not isinstance(value, str) or (self.choices and value not in self.choices):
                 fail(f"got {value!r}")
             return value
