@@ -77,7 +77,6 @@ def _impactor_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathli
     # Fig. 3 of seed 000 for the first run: |omega| against the switching curves.
     _, trace = simulate_one(scenario, index=0, seed=summary.get("seed"))
     t = trace.t_s
-    tgo = t[-1] - t
     fig, ax = plt.subplots(figsize=(9, 4.5))
     if scenario.config["guidance"]["law"] == "los":
         ls = trace.law_state
@@ -102,7 +101,6 @@ def _impactor_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathli
     ax.legend(h1 + h2, l1 + l2, loc="upper left", fontsize=8)
     ax.set_title(f"{scenario.name}: {title}")
     ax.grid(alpha=0.3)
-    del tgo
     files.append(out / "engine_trace.png")
     fig.savefig(files[-1], dpi=120, bbox_inches="tight")
     plt.close(fig)
