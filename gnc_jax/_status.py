@@ -16,3 +16,11 @@ class Status(enum.IntEnum):
     @classmethod
     def name_of(cls, code: int) -> str:
         return cls(int(code)).name
+
+
+def all_finite(outcome):
+    """True when every field of an outcome NamedTuple after ``status`` (its first field) is
+    finite: the check behind ``Status.nan``, shared by every simulator."""
+    import jax.numpy as jnp
+
+    return jnp.all(jnp.array([jnp.all(jnp.isfinite(jnp.asarray(x))) for x in outcome[1:]]))

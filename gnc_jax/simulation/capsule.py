@@ -16,7 +16,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._status import Status
+from .._status import Status, all_finite
 from .._types import Array, Float, PRNGKeyArray, Scalar, Vector3
 from ..dynamics.atmosphere import Atmosphere
 from ..dynamics.entry import (
@@ -501,7 +501,7 @@ def simulate(sim: CapsuleSimulation, law: SkipEntryGuidance, key: PRNGKeyArray, 
         t_chute_s=c.t_chute,
         dispersion=draws,
     )
-    finite = jnp.all(jnp.array([jnp.all(jnp.isfinite(jnp.asarray(x))) for x in outcome[1:]]))
+    finite = all_finite(outcome)
     status = jnp.where(
         ~finite,
         Status.nan,

@@ -13,7 +13,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._status import Status
+from .._status import Status, all_finite
 from .._types import Array, Float, PRNGKeyArray, Scalar, Vector3
 from ..dynamics.impactor import (
     G0,
@@ -303,7 +303,7 @@ def simulate(
         nav_sigma_b_m=sigma_b,
         **draws,
     )
-    finite = jnp.all(jnp.array([jnp.all(jnp.isfinite(jnp.asarray(x))) for x in outcome[1:]]))
+    finite = all_finite(outcome)
     outcome = outcome._replace(status=jnp.where(finite, Status.ok, Status.nan).astype(jnp.int32))
     if record:
         rec = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[2:]), rec)

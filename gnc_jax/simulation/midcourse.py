@@ -24,7 +24,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._status import Status
+from .._status import Status, all_finite
 from .._types import Array, Float, PRNGKeyArray, Scalar, Vector3
 from ..dynamics.heliocentric import (
     EphemerisTable,
@@ -348,7 +348,7 @@ def simulate(
         initial_position_error_m=dr,
         initial_velocity_error_mps=dv,
     )
-    finite = jnp.all(jnp.array([jnp.all(jnp.isfinite(jnp.asarray(x))) for x in outcome[1:]]))
+    finite = all_finite(outcome)
     bad_status = jnp.maximum(status0, status1)
     converged = jnp.where(failed, Status.no_convergence, Status.ok)
     status = jnp.where(bad_status != Status.ok, bad_status, converged)
