@@ -212,3 +212,36 @@ def simulate_one(scenario: Scenario, index: int = 0, seed: int | None = None, re
     seed = scenario.seed if seed is None else seed
     out, trace = _jitted_single(system)(sim, law, run_key(seed, index), record=record)
     return jax.tree_util.tree_map(np.asarray, out), jax.tree_util.tree_map(np.asarray, trace)
+
+
+def simulate_traces(
+    scenario: Scenario, indices, seed: int | None = None, every: int = 1, chunk_size: int = 100
+):
+    """Traces of runs ``indices`` (same keys as in the batch), ``vmap``ped in chunks.
+
+    Returns ``(outcomes, traces)`` as dicts of numpy arrays with the run on the first axis;
+    the traces keep every ``every``-th sample along time to bound memory.
+    """
+    system = SYSTEMS[scenario.kind]
+    sim, law = system.build(scenario)
+    seed = scenario.seed if seed is None else seed
+    fn = _batched_traces(system, every)
+    indices = np.asarray(indices, dtype=int)
+    outs, traces = [], []
+    for start in range(0, len(indices), chunk_size):
+        idx = indices[start : start + chunk_size]
+        pad = np.pad(idx, (0, chunk_size - len(idx)), mode="edge")  # one compiled shape
+        o, tr = jax.tree_util.tree_map(np.asarray, fn(sim, law, seed, jnp.asarray(pad)))
+        outs.append({k: v[: len(idx)] for k, v in o._asdict().items()})
+        traces.append({k: v[: len(idx)] for k, v in tr._asdict().items()})
+    cat = lambda parts: {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}  # noqa: E731
+    return cat(outs), cat(traces)
+
+
+@functools.lru_cache(maxsize=16)
+def _batched_traces(system: System, every: int):
+    def run(sim, law, seed, i):
+        out, trace = system.simulate(sim, law, run_key(seed, i), record=True)
+        return out, jax.tree_util.tree_map(lambda x: x[::every], trace)
+
+    return jax.jit(jax.vmap(run, in_axes=(None, None, None, 0)))

@@ -73,6 +73,18 @@ def _capsule_stats(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
         "crossrange_err_km_3sigma": "{:.2f} .. {:.2f}".format(
             *_interval(o["crossrange_err_km"][ok])["three_sigma"]
         ),
+        # the empirical interval holding 99.73 % of the runs (what mean +- 3 std means for a
+        # Gaussian), which a few heavy-tailed runs do not stretch
+        **{
+            f"{name}_central_99_73": "{:.2f} .. {:.2f}".format(
+                *np.percentile(o[name][ok], [0.135, 99.865])
+            )
+            for name in ("downrange_err_km", "crossrange_err_km")
+        },
+        **{
+            f"{name}_outside_2p5_km": int(np.sum(np.abs(o[name][ok]) > 2.5))
+            for name in ("downrange_err_km", "crossrange_err_km")
+        },
         "load_peak_g_max": float(np.max(o["load_peak_g"][ok])),
         "load_peak_g_mean": float(np.mean(o["load_peak_g"][ok])),
         "heat_rate_peak_kw_m2_max": float(np.max(o["heat_rate_peak_kw_m2"][ok])),
