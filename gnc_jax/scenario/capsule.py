@@ -115,7 +115,7 @@ SCHEMA = {
         "skip_out_altitude_km": F("float", 300.0, lo=130.0, hi=1e5, units="km"),
         "k_range": F(
             "float",
-            1.5,
+            2.5,
             lo=0.0,
             hi=100.0,
             doc="eq. 7: overall gain on the range deviation (1 = dead-beat)",
@@ -156,7 +156,7 @@ SCHEMA = {
         "funnel_base_km": F("float", 0.5, lo=0.0, hi=1e3, units="km"),
         "funnel_quadratic_km": F(
             "float",
-            1.2,
+            0.6,
             lo=0.0,
             hi=1e3,
             units="km/(km/s)^2",
@@ -177,7 +177,7 @@ SCHEMA = {
         ),
         "w_margin": F(
             "float",
-            2.0,
+            3.0,
             lo=0.0,
             hi=1e3,
             doc="weight of the control-margin term of the design objective",
