@@ -100,7 +100,7 @@ def test_downrange_gradient_wrt_tracking_gains_matches_finite_differences(capsul
         tuned = eqx.tree_at(lambda l: tuple(getattr(l, n) for n in names), law, tuple(gains))
         return simulate(sim, tuned, gj.run_key(3, i))[0].downrange_err_km
 
-    g0 = jnp.array([1.5, 1.0, 1.0, 0.5])
+    g0 = jnp.stack([getattr(law, n) for n in names])  # the scenario's defaults
     runs = jnp.arange(3)
     jac = np.asarray(jax.jit(jax.vmap(jax.jacfwd(downrange), in_axes=(None, 0)))(g0, runs))
     steps = np.array([1e-6, 1e-7])
