@@ -1,7 +1,7 @@
 """Navigation: camera models and filters."""
 
 from .camera import camera_attitude, los_angles, project, small_rotation
-from .centroid import Centroid, centroid, label_components
+from .centroid import Centroid, extract_centroid, label_components
 from .ekf import NavEstimate, propagate_covariance, propagate_state, update_los
 from .render import (
     CameraModel,
@@ -23,7 +23,7 @@ __all__ = [
     "propagate_state",
     "update_los",
     "Centroid",
-    "centroid",
+    "extract_centroid",
     "label_components",
     "CameraModel",
     "Frame",

@@ -60,7 +60,7 @@ def label_components(mask: Bool[Array, "h w"], iterations: int) -> tuple[Array, 
     return lab, jnp.all(sweep(lab) == lab)
 
 
-def centroid(dn: Float[Array, "h w"], window_px: int, iterations: int) -> Centroid:
+def extract_centroid(dn: Float[Array, "h w"], window_px: int, iterations: int) -> Centroid:
     """Seed 002 §3.1 centroid of the brightest target in ``dn`` (grey levels)."""
     h, w = dn.shape
     background = jnp.mean(dn[:, 0])

@@ -26,7 +26,7 @@ from ..dynamics.impactor import (
 )
 from ..guidance.base import AbstractImpactorGuidance, ImpactorGuidanceContext
 from ..navigation.camera import camera_attitude, los_angles, small_rotation
-from ..navigation.centroid import centroid
+from ..navigation.centroid import extract_centroid
 from ..navigation.ekf import NavEstimate, propagate_covariance, propagate_state, update_los
 from ..navigation.render import (
     CameraModel,
@@ -234,7 +234,7 @@ def image_measurement(sim: ImpactorSimulation, nav: NavEstimate, c_true, c_est, 
     disc = jnp.arcsin(jnp.minimum(tgt.bounding_radius_m / rho_hat, 0.999))
     bin_ = choose_binning(cam, disc, pointing_sigma)
     frame = render_frame(cam, tgt, c_true, -r_true, uv_pred, bin_, key)
-    c = centroid(frame.dn, cam.window_px, cam.label_iterations)
+    c = extract_centroid(frame.dn, cam.window_px, cam.label_iterations)
     z = roi_to_tangent(cam, frame.origin_px, frame.bin, c.xy)
     offset = phase_offset_tangent(c_est, nav.r, tgt.sun_direction, tgt.mean_radius_m)
     return z - sim.phase_correction * offset, c.valid
