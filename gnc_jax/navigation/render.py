@@ -20,7 +20,8 @@ matrix product (``samples^2`` x ``roi_px`` per axis).
 Detector: on-chip binning by ``bin`` (a power of two chosen per frame, see
 :func:`choose_binning`), auto-exposure so that a fully lit (cos i = 1) binned pixel collects
 ``signal_e`` electrons, shot noise (Gaussian with variance = mean, accurate above ~20 e-), read
-noise once per binned pixel, full-well clipping, gain, bias pedestal and quantisation to
+noise once per binned pixel (the two drawn as one Gaussian of the summed variance),
+full-well clipping, gain, bias pedestal and quantisation to
 ``adc_bits`` grey levels.
 
 Conventions: detector coordinates in native pixels, x along the camera x_c axis (columns), y
@@ -235,10 +236,9 @@ def digitise(camera: CameraModel, electrons, key: PRNGKeyArray | None) -> Float[
     """Shot and read noise, full well, gain, bias and quantisation (``key=None``: noise-free)."""
     e = electrons
     if key is not None:
-        w = jax.random.normal(key, (2,) + e.shape)
-        shot = jnp.sqrt(jnp.maximum(e, 0.0)) * w[0]
-        read = camera.read_noise_e * w[1]
-        e = e + shot + read
+        # shot (Gaussian, variance = mean) + read noise: one normal draw of the summed variance
+        var = jnp.maximum(e, 0.0) + camera.read_noise_e**2
+        e = e + jnp.sqrt(var) * jax.random.normal(key, e.shape)
     e = jnp.minimum(e, camera.full_well_e)
     dn = jnp.round(e / camera.gain_e_per_dn + camera.bias_dn)
     return jnp.clip(dn, 0.0, camera.adc_max_dn)
