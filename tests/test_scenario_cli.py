@@ -42,6 +42,7 @@ BAD_INPUT = [
     (["run", "autonav-predictive", "--set", "navigation.measurement=pixels"], "got 'pixels'"),
     (["run", "autonav-predictive", "--set", "camera.roi_px=4"], "camera.roi_px: 4"),
     (["run", "autonav-predictive", "--set", "target.semi_axes_km=[3.0,0.0,3.0]"], "semi_axes"),
+    (["run", "autonav-predictive", "--set", "camera.max_bin_log2=5"], "camera.max_bin_log2: 5"),
     (
         ["run", "autonav-predictive", "--set", "dynamics.sun_direction=[0.0,0.0,0.0]"],
         "dynamics.sun_direction: must be non-zero",
