@@ -241,13 +241,7 @@ def test_image_navigation_vmap_equals_per_run_loop():
             )
         assert study.outcomes["images_rejected"][i] == one.images_rejected
     # the image front end is in the loop: its LOS errors are not the noise model's 10 urad
-    noise = gj.run_study(
-        sc.with_overrides({"navigation.measurement": "noise"}), runs=4, seed=5, progress=False
-    )
-    image_err = study.outcomes["los_error_rms_urad"]
-    noise_err = noise.outcomes["los_error_rms_urad"]
-    assert not np.allclose(image_err, noise_err)
-    assert np.all(np.abs(noise_err - 10.0) < 2.0)
+    assert np.all(study.outcomes["los_error_rms_urad"] < 8.0)
 
 
 def test_phase_correction_removes_the_brightness_offset():
