@@ -42,6 +42,8 @@ LABELS = {
     "b0_err_km_rms": "|ΔB| no guidance RMS (km)",
     "b0_err_r_km_std": "ΔB_R no guidance 1σ (km)",
     "b0_err_t_km_std": "ΔB_T no guidance 1σ (km)",
+    "miss_mean_m": "miss mean (m)",
+    "los_error_rms_urad_mean": "LOS meas. error RMS (µrad)",
 }
 
 

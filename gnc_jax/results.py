@@ -47,6 +47,9 @@ def _impactor_stats(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
         firings_mode=int(np.argmax(counts)),
         firings_histogram={int(k): int(v) for k, v in enumerate(counts) if v},
         fuel_mean_kg=float(np.mean(o["fuel_kg"][ok])),
+        los_error_rms_urad_mean=float(np.mean(o["los_error_rms_urad"][ok])),
+        images_rejected_max=int(np.max(o["images_rejected"][ok])),
+        images_rejected_mean=float(np.mean(o["images_rejected"][ok])),
     )
 
 

@@ -37,6 +37,16 @@ BAD_INPUT = [
     (["run", "deep-impact-los", "--runs", "-5"], "--runs: -5; allowed"),
     (["run", "deep-impact-los", "--seed", "x"], "--seed: 'x'"),
     (["run", "missing.toml"], "scenario: no such file 'missing.toml'"),
+    (["run", "autonav-predictive", "--set", "camera.window_px=16"], "camera.window_px: 16"),
+    (["run", "autonav-predictive", "--set", "camera.window_px=31"], "camera.window_px: 31"),
+    (["run", "autonav-predictive", "--set", "navigation.measurement=pixels"], "got 'pixels'"),
+    (["run", "autonav-predictive", "--set", "camera.roi_px=4"], "camera.roi_px: 4"),
+    (["run", "autonav-predictive", "--set", "target.semi_axes_km=[3.0,0.0,3.0]"], "semi_axes"),
+    (["run", "autonav-predictive", "--set", "camera.max_bin_log2=5"], "camera.max_bin_log2: 5"),
+    (
+        ["run", "autonav-predictive", "--set", "dynamics.sun_direction=[0.0,0.0,0.0]"],
+        "dynamics.sun_direction: must be non-zero",
+    ),
 ]
 
 
@@ -145,7 +155,7 @@ def test_run_writes_results_and_report(tmp_path, capsys):
     assert resolved["approach.position_km"] == [10200.0, 0.0, 0.0]
 
     assert cli.main(["report", str(out)]) == 0
-    for name in ("b_plane.png", "dv_firings.png", "engine_trace.png"):
+    for name in ("b_plane.png", "dv_firings.png", "engine_trace.png", "centroid_frames.png"):
         png = out / name
         assert png.is_file() and png.read_bytes()[:4] == b"\x89PNG" and png.stat().st_size > 10_000
 

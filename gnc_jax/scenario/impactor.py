@@ -64,12 +64,71 @@ SCHEMA = {
             doc="target's heliocentric distance for the solar tide; 0 = off",
         ),
         "sun_direction": F(
-            "floats", [1.0, 0.0, 0.0], length=3, doc="direction from the target to the Sun"
+            "floats",
+            [1.0, 0.0, 0.0],
+            length=3,
+            doc="direction from the target to the Sun (solar tide; image front-end lighting)",
         ),
     },
     "camera": {
         "focal_length_m": F("float", 2.103, lo=0.0, lo_open=True, hi=100.0, units="m"),
         "image_interval_s": F("float", 15.0, lo=0.0, lo_open=True, hi=3600.0, units="s"),
+        # Image front end (navigation.measurement = "image"); Deep Impact MRI class defaults.
+        "pixel_pitch_um": F(
+            "float", 21.0, lo=0.0, lo_open=True, hi=1e3, units="um", doc="native pixel size"
+        ),
+        "psf_sigma_px": F(
+            "float", 0.7, lo=0.05, hi=20.0, units="px", doc="Gaussian PSF sigma, native pixels"
+        ),
+        "signal_e": F(
+            "float",
+            20000.0,
+            lo=1.0,
+            hi=1e7,
+            units="e-",
+            doc="auto-exposure: electrons of a fully lit (cos i = 1) binned pixel",
+        ),
+        "full_well_e": F("float", 100000.0, lo=1.0, hi=1e8, units="e-", doc="clipping level"),
+        "read_noise_e": F("float", 20.0, lo=0.0, hi=1e5, units="e-", doc="per pixel read"),
+        "adc_bits": F("int", 14, lo=8, hi=24, doc="quantisation; gain = full_well/(2^bits-1)"),
+        "bias_dn": F(
+            "float",
+            100.0,
+            lo=1.0,
+            hi=1e6,
+            units="DN",
+            doc="pedestal (the threshold is 2 x the first column's mean)",
+        ),
+        "roi_px": F("int", 32, lo=8, hi=512, units="px", doc="ROI side, binned pixels"),
+        "window_px": F(
+            "int", 17, lo=3, hi=511, units="px", doc="sub-pixel window side (odd), binned pixels"
+        ),
+        "samples": F("int", 32, lo=4, hi=512, doc="rays per axis over the target"),
+        "label_iterations": F(
+            "int", 24, lo=1, hi=10000, doc="sweeps of the connected-component labelling"
+        ),
+        "max_bin_log2": F("int", 7, lo=0, hi=12, doc="largest binning is 2^max_bin_log2"),
+    },
+    "target": {
+        "semi_axes_km": F(
+            "floats",
+            [3.0, 3.0, 3.0],
+            length=3,
+            lo=0.0,
+            lo_open=True,
+            hi=1e3,
+            units="km",
+            doc="Lambertian ellipsoid semi-axes (equal: sphere; Tempel 1 class 3 km)",
+        ),
+        "orientation_deg": F(
+            "floats",
+            [0.0, 0.0, 0.0],
+            length=3,
+            lo=-360.0,
+            hi=360.0,
+            units="deg",
+            doc="rotation vector body -> inertial of the ellipsoid axes",
+        ),
     },
     "navigation": {
         "knowledge_position_km": F(
@@ -98,6 +157,17 @@ SCHEMA = {
         ),
         "consider_attitude_bias": F(
             "bool", True, doc="add the attitude-bias rotation to the initial covariance"
+        ),
+        "measurement": F(
+            "str",
+            "noise",
+            choices=("noise", "image"),
+            doc="noise: LOS + Gaussian error; image: rendered frame + seed 002 centroiding",
+        ),
+        "phase_correction": F(
+            "bool",
+            True,
+            doc="image: remove the Lambertian-sphere centre-of-brightness offset (phase angle)",
         ),
     },
     "errors": {
@@ -272,6 +342,29 @@ def check(cfg: dict) -> None:
         raise ScenarioError(f"guidance.cutoff_tgo_s: allowed: [0, {tof:g}) s (time of flight)")
     if not g["retarget_tgo_s"] < tof:
         raise ScenarioError(f"guidance.retarget_tgo_s: allowed: [0, {tof:g}) s")
+    if cam["window_px"] % 2 == 0 or cam["window_px"] > cam["roi_px"] - 4:
+        raise ScenarioError(
+            f"camera.window_px: {cam['window_px']}; allowed: an odd number <= camera.roi_px - 4 "
+            f"= {cam['roi_px'] - 4}"
+        )
+    if cfg["navigation"]["measurement"] == "image":
+        # the largest binning must fit the target's disc into the sub-pixel window at cut-off
+        rho_cut_m = math.hypot(*v) * 1e3 * g["cutoff_tgo_s"]
+        ifov = cam["pixel_pitch_um"] * 1e-6 / cam["focal_length_m"]
+        radius_px = max(cfg["target"]["semi_axes_km"]) * 1e3 / max(rho_cut_m, 1e-9) / ifov
+        need = (radius_px + 3.0 * cam["psf_sigma_px"]) / 2.0 ** cam["max_bin_log2"]
+        if need > 0.5 * (cam["window_px"] - 1) - 1.0:
+            raise ScenarioError(
+                f"camera.max_bin_log2: {cam['max_bin_log2']}; the target ({radius_px:.0f} px "
+                f"radius at the cut-off) does not fit camera.window_px = {cam['window_px']} even "
+                "at the largest binning; allowed: a larger max_bin_log2 or window_px, or a "
+                "longer guidance.cutoff_tgo_s"
+            )
+    sun = cfg["dynamics"]["sun_direction"]
+    if math.hypot(*sun) == 0.0:
+        raise ScenarioError(
+            "dynamics.sun_direction: must be non-zero; allowed: any non-zero vector"
+        )
     bt = g["burn_times_s"]
     t_cut = tof - g["cutoff_tgo_s"]
     if any(b2 - b1 < cam["image_interval_s"] for b1, b2 in zip(bt, bt[1:])) or any(

@@ -26,7 +26,16 @@ from ..dynamics.impactor import (
 )
 from ..guidance.base import AbstractImpactorGuidance, ImpactorGuidanceContext
 from ..navigation.camera import camera_attitude, los_angles, small_rotation
+from ..navigation.centroid import extract_centroid
 from ..navigation.ekf import NavEstimate, propagate_covariance, propagate_state, update_los
+from ..navigation.render import (
+    CameraModel,
+    TargetModel,
+    choose_binning,
+    phase_offset_tangent,
+    render_frame,
+    roi_to_tangent,
+)
 
 
 class ImpactorErrors(eqx.Module):
@@ -59,6 +68,11 @@ class ImpactorSimulation(eqx.Module):
         consider_attitude_bias: 1.0 to add the attitude-bias rotation to the filter's initial
             covariance (:func:`attitude_bias_covariance`), 0.0 to ignore it.
         n_images, steps_per_image: loop sizes (static); coast_steps: RK4 steps of the final coast.
+        measurement: "noise" (LOS + Gaussian image-processing error) or "image" (a rendered
+            frame centroided by the seed 002 pipeline, :func:`image_measurement`) (static).
+        camera, target: camera/detector and target models of the "image" front end.
+        phase_correction: 1.0 to remove the predicted Lambertian-sphere centre-of-brightness
+            offset from each image centroid before the update, 0.0 not to.
     """
 
     r0_m: Vector3
@@ -74,6 +88,14 @@ class ImpactorSimulation(eqx.Module):
     n_images: int = eqx.field(static=True)
     steps_per_image: int = eqx.field(static=True)
     coast_steps: int = eqx.field(static=True, default=4)
+    measurement: str = eqx.field(static=True, default="noise")
+    camera: CameraModel = eqx.field(default_factory=CameraModel)
+    target: TargetModel = eqx.field(
+        default_factory=lambda: TargetModel(
+            jnp.full(3, 3e3), jnp.eye(3), jnp.array([1.0, 0.0, 0.0])
+        )
+    )
+    phase_correction: Scalar = 1.0
 
 
 class ImpactorOutcome(NamedTuple):
@@ -96,6 +118,8 @@ class ImpactorOutcome(NamedTuple):
     knowledge_velocity_error_mps: Vector3
     attitude_bias_rad: Vector3
     accel_bias_mps2: Vector3
+    los_error_rms_urad: Scalar  # per-axis RMS of (measured - true) LOS angles over used images
+    images_rejected: Array  # int, images without a valid centroid (no filter update)
 
 
 class StepRecord(NamedTuple):
@@ -120,6 +144,8 @@ class _Carry(NamedTuple):
     firings: Array
     burn_time_s: Scalar
     burn_time_image_s: Scalar  # burn time since the last image (covariance growth)
+    los_error_sq: Scalar  # sum of squared LOS measurement errors (rad^2) over used images
+    images_used: Array  # int
 
 
 # Stream identifiers for jax.random.fold_in: each kind of draw has its own stream, so adding a
@@ -182,6 +208,38 @@ def initial_conditions(sim: ImpactorSimulation, key: PRNGKeyArray):
     return truth, NavEstimate(x_hat, p0), draws
 
 
+def image_measurement(sim: ImpactorSimulation, nav: NavEstimate, c_true, c_est, r_true, sigma, key):
+    """Image-level LOS measurement: render, centroid, phase-correct (seed 002 §3.1; SPEC §5).
+
+    The on-board software places the region of interest where its estimate predicts the target
+    (through its attitude estimate ``c_est``), with a binning that fits the predicted disc and
+    the 3-sigma innovation uncertainty (:func:`~gnc_jax.navigation.render.choose_binning`).
+    The frame is rendered from the TRUE geometry in the TRUE camera frame ``c_true``; the
+    centroid's tangent angles are the measurement, corrected by the predicted Lambertian-sphere
+    centre-of-brightness offset when ``sim.phase_correction`` is 1.
+
+    Returns:
+        ``(z, valid)``: tangent angles (rad) and whether the centroid is usable.
+    """
+    cam, tgt = sim.camera, sim.target
+
+    def h(x):
+        return los_angles(c_est, -x[:3])
+
+    uv_pred = h(nav.x)
+    hj = jax.jacfwd(h)(nav.x)
+    s_pred = hj @ nav.p @ hj.T + sigma**2 * jnp.eye(2)
+    pointing_sigma = jnp.sqrt(jnp.max(jnp.diag(s_pred)))
+    rho_hat = jnp.linalg.norm(nav.r)
+    disc = jnp.arcsin(jnp.minimum(tgt.bounding_radius_m / rho_hat, 0.999))
+    bin_ = choose_binning(cam, disc, pointing_sigma)
+    frame = render_frame(cam, tgt, c_true, -r_true, uv_pred, bin_, key)
+    c = extract_centroid(frame.dn, cam.window_px, cam.label_iterations)
+    z = roi_to_tangent(cam, frame.origin_px, frame.bin, c.xy)
+    offset = phase_offset_tangent(c_est, nav.r, tgt.sun_direction, tgt.mean_radius_m)
+    return z - sim.phase_correction * offset, c.valid
+
+
 def simulate(
     sim: ImpactorSimulation,
     law: AbstractImpactorGuidance,
@@ -235,6 +293,8 @@ def simulate(
             firings=carry.firings + ignition.astype(carry.firings.dtype),
             burn_time_s=carry.burn_time_s + throttle * dt,
             burn_time_image_s=carry.burn_time_image_s + throttle * dt,
+            los_error_sq=carry.los_error_sq,
+            images_used=carry.images_used,
         )
         rec = None
         if record:
@@ -250,11 +310,26 @@ def simulate(
         c_cmd = camera_attitude(-carry.nav.r, r_axis)
         c_true = small_rotation(err.attitude_control_rad * w[2:5]) @ c_cmd
         c_est = small_rotation(att_bias + err.attitude_noise_rad * w[5:8]) @ c_true
-        z = los_angles(c_true, -carry.truth.r) + err.image_processing_rad * w[:2]
+        z_true = los_angles(c_true, -carry.truth.r)
         sigma = jnp.sqrt(err.image_processing_rad**2 + err.attitude_noise_rad**2)
-        nav, _ = update_los(carry.nav, z, c_est, sigma)
+        if sim.measurement == "image":
+            z, valid = image_measurement(
+                sim, carry.nav, c_true, c_est, carry.truth.r, sigma, jax.random.fold_in(k_img, 1)
+            )
+            updated, _ = update_los(carry.nav, z, c_est, sigma)
+            nav = jax.tree_util.tree_map(lambda a, b: jnp.where(valid, a, b), updated, carry.nav)
+        else:
+            z = z_true + err.image_processing_rad * w[:2]
+            valid = jnp.ones((), bool)
+            nav, _ = update_los(carry.nav, z, c_est, sigma)
         law_state = law.plan(carry.law_state, nav, t, ctx)
-        carry = carry._replace(nav=nav, law_state=law_state, burn_time_image_s=jnp.zeros(()))
+        carry = carry._replace(
+            nav=nav,
+            law_state=law_state,
+            burn_time_image_s=jnp.zeros(()),
+            los_error_sq=carry.los_error_sq + jnp.where(valid, jnp.sum((z - z_true) ** 2), 0.0),
+            images_used=carry.images_used + valid.astype(carry.images_used.dtype),
+        )
 
         k_steps = jax.random.fold_in(jax.random.fold_in(key, _STEPS), i)
         noise = jax.random.normal(k_steps, (sim.steps_per_image, 6))
@@ -277,6 +352,8 @@ def simulate(
         firings=jnp.zeros((), jnp.int32),
         burn_time_s=z,
         burn_time_image_s=z,
+        los_error_sq=z,
+        images_used=jnp.zeros((), jnp.int32),
     )
     carry, rec = jax.lax.scan(image_step, carry0, jnp.arange(sim.n_images))
 
@@ -302,12 +379,47 @@ def simulate(
         nav_position_error_m=jnp.linalg.norm(nav.r - carry.truth.r),
         nav_sigma_b_m=sigma_b,
         **draws,
+        los_error_rms_urad=1e6
+        * jnp.sqrt(carry.los_error_sq / jnp.maximum(2 * carry.images_used, 1)),
+        images_rejected=(sim.n_images - carry.images_used).astype(jnp.int32),
     )
     finite = all_finite(outcome)
     outcome = outcome._replace(status=jnp.where(finite, Status.ok, Status.nan).astype(jnp.int32))
     if record:
         rec = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[2:]), rec)
     return outcome, rec
+
+
+def _camera_model(cam: dict) -> CameraModel:
+    f = lambda x: jnp.asarray(x, dtype=jnp.float64)  # noqa: E731
+    adc_max = 2.0 ** cam["adc_bits"] - 1.0
+    return CameraModel(
+        focal_length_m=f(cam["focal_length_m"]),
+        pixel_pitch_m=f(cam["pixel_pitch_um"] * 1e-6),
+        psf_sigma_px=f(cam["psf_sigma_px"]),
+        signal_e=f(cam["signal_e"]),
+        full_well_e=f(cam["full_well_e"]),
+        read_noise_e=f(cam["read_noise_e"]),
+        gain_e_per_dn=f(cam["full_well_e"] / adc_max),
+        bias_dn=f(cam["bias_dn"]),
+        adc_max_dn=f(adc_max),
+        roi_px=int(cam["roi_px"]),
+        window_px=int(cam["window_px"]),
+        samples=int(cam["samples"]),
+        label_iterations=int(cam["label_iterations"]),
+        max_bin_log2=int(cam["max_bin_log2"]),
+    )
+
+
+def _target_model(tg: dict, sun_direction) -> TargetModel:
+    import math
+
+    rot = [math.radians(a) for a in tg["orientation_deg"]]
+    return TargetModel(
+        semi_axes_m=jnp.asarray(tg["semi_axes_km"], dtype=jnp.float64) * 1e3,
+        c_bi=small_rotation(jnp.asarray(rot, dtype=jnp.float64)),
+        sun_direction=sun_direction,
+    )
 
 
 def build(scenario) -> tuple[ImpactorSimulation, AbstractImpactorGuidance]:
@@ -387,6 +499,10 @@ def build(scenario) -> tuple[ImpactorSimulation, AbstractImpactorGuidance]:
         n_images=int(math.ceil(t_cut / image_dt - 1e-9)),
         steps_per_image=int(round(image_dt / g["dt_s"])),
         coast_steps=int(g["predictor_steps"]),
+        measurement=nv["measurement"],
+        camera=_camera_model(cam),
+        target=_target_model(cfg["target"], sun / jnp.linalg.norm(sun)),
+        phase_correction=f(1.0 if nv["phase_correction"] else 0.0),
     )
     if g["law"] == "los":
         law = LOSSwitchingCurveGuidance(f(g["k1"]), f(g["k2"]), f(g["temperature"]))

@@ -29,6 +29,9 @@ def short_scenario(request):
 def test_vmapped_batch_equals_per_run_loop(short_scenario):
     study = gj.run_study(short_scenario, runs=6, seed=3, progress=False)
     assert study.summary()["failed"] == 0
+    # the noise front end's LOS errors are its 10 urad model; no frame is ever rejected
+    assert np.all(np.abs(study.outcomes["los_error_rms_urad"] - 10.0) < 3.0)
+    assert np.all(study.outcomes["images_rejected"] == 0)
     for i in range(6):
         one, _ = gj.simulate_one(short_scenario, index=i, seed=3, record=False)
         for name in ("miss_m", "dv_mps", "b_t_m", "nav_sigma_b_m"):
