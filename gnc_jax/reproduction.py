@@ -39,6 +39,7 @@ LABELS = {
     "b0_err_r_km_std": "ΔB_R no guidance 1σ (km)",
     "b0_err_t_km_std": "ΔB_T no guidance 1σ (km)",
 }
+LABELS.update({"firings_mean": "firings (mean)", "miss_mean_m": "miss mean (m)"})
 
 
 def comparison_rows(summary: dict) -> list[tuple[str, str, str]]:
