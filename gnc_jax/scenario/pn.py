@@ -168,7 +168,9 @@ def check(cfg: dict) -> None:
     """Cross-field checks of a validated pn configuration."""
     a, g, sc, nv = cfg["approach"], cfg["guidance"], cfg["spacecraft"], cfg["navigation"]
     if math.hypot(*a["target_position_km"]) == 0.0:
-        raise ScenarioError("approach.target_position_km: must be non-zero (heliocentric)")
+        raise ScenarioError(
+            "approach.target_position_km: [0, 0, 0]; allowed: a non-zero heliocentric position"
+        )
     if a["geometry"] == "planar":
         for name in (
             "target_position_km",
@@ -184,8 +186,8 @@ def check(cfg: dict) -> None:
     tof = time_of_flight_s(cfg)
     if tof <= 0.0:
         raise ScenarioError(
-            "approach.impactor_velocity_kmps: the impactor must close on the target "
-            "(relative position . relative velocity < 0)"
+            "approach.impactor_velocity_kmps: the impactor must close on the target; allowed: "
+            "a relative velocity with (relative position . relative velocity) < 0"
         )
     if not g["coast_s"] < tof:
         raise ScenarioError(

@@ -171,7 +171,8 @@ def test_law_step_fires_along_the_command_and_coasts_after_cutoff():
     cmd, st = law.step(law.init(nav, ctx), nav, 0.0, ctx)
     assert float(cmd.throttle) == pytest.approx(0.05)  # the pulse fraction of the step
     np.testing.assert_allclose(
-        np.asarray(cmd.direction), np.asarray(st.command_mps2) / float(jnp.linalg.norm(st.command_mps2))
+        np.asarray(cmd.direction),
+        np.asarray(st.command_mps2) / float(jnp.linalg.norm(st.command_mps2)),
     )
     cmd, _ = law.step(st, nav, 91200.0, ctx)
     assert float(cmd.throttle) == 0.0
