@@ -21,7 +21,7 @@ from jax.sharding import Mesh, PartitionSpec
 
 from ._status import Status
 from .scenario import Scenario, ScenarioError
-from .simulation import capsule, impactor, midcourse
+from .simulation import capsule, impactor, midcourse, pn
 
 
 @dataclasses.dataclass(frozen=True)
@@ -37,6 +37,7 @@ SYSTEMS: dict[str, System] = {
     "capsule": System(capsule.build, capsule.simulate),
     "midcourse": System(midcourse.build, midcourse.simulate),
 }
+SYSTEMS["pn"] = System(pn.build, pn.simulate)
 
 
 def run_key(seed: int, index):

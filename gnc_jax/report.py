@@ -427,6 +427,123 @@ FIGURES = {
 }
 
 
+def _pn_command_panel(ax, trace, law, title):
+    """Seed 004 Figs. 7-9: the continuous APN command against time, with the engine pulses."""
+    t_h = trace.t_s / 3600.0
+    r = trace.r_m
+    u = -r / np.linalg.norm(r, axis=1, keepdims=True)
+    planar = np.allclose(r[:, 2], 0.0)
+    if planar:  # signed, as in the paper: the component along the LOS turned by +90 deg
+        a = trace.command_mps2[:, 0] * -u[:, 1] + trace.command_mps2[:, 1] * u[:, 0]
+        label = "A (eq. 11), in-plane normal to the LOS"
+    else:
+        a = np.linalg.norm(trace.command_mps2, axis=1)
+        label = "|A| (eq. 11)"
+    on = trace.engine_on > 0.5
+    ax.plot(t_h, a, lw=0.8, color="C0", label=label)
+    a_on, a_off = float(law.a_on_mps2), float(law.a_off_mps2)
+    for sign in (1, -1) if planar else (1,):
+        ax.axhline(sign * a_on, color="C3", ls="--", lw=0.8)
+        ax.axhline(sign * a_off, color="C2", ls=":", lw=0.8)
+    ax.plot([], [], "C3--", lw=0.8, label=f"a_on = {a_on:.3g} m/s²")
+    ax.plot([], [], "C2:", lw=0.8, label=f"a_off = {a_off:.3g} m/s²")
+    ax.set_yscale("symlog", linthresh=a_off)
+    ymax = max(np.abs(a).max(), a_on) * 1.5
+    ax.set_ylim(-ymax if planar else 0.0, ymax)
+    ax.vlines(t_h[on], -ymax if planar else 0.0, ymax, color="C1", alpha=0.25, lw=0.6)
+    ax.plot([], [], color="C1", alpha=0.5, label=f"engine pulses ({on.sum()} steps)")
+    ax.set_ylabel("command (m/s²)")
+    ax.set_title(title, fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper left", fontsize=7)
+
+
+def _pn_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib.Path]:
+    """Seed 004: command histories (Figs. 7-9), B-plane misses (Fig. 10), Δv and firings."""
+    from .montecarlo import SYSTEMS, simulate_one
+
+    plt = _plt()
+    ok = runs["status"] == Status.ok
+    files = []
+
+    def save(fig, name):
+        files.append(out / name)
+        fig.savefig(files[-1], dpi=120, bbox_inches="tight")
+        plt.close(fig)
+
+    # Run 0 of the study, then the three laws of Table 3 error-free from the same scenario.
+    _, law = SYSTEMS["pn"].build(scenario)
+    _, trace = simulate_one(scenario, index=0, seed=summary.get("seed"))
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    g = scenario.config["guidance"]
+    _pn_command_panel(ax, trace, law, f"{scenario.name}, run 0: N0 = {g['n0']:g}, k = {g['k']:g}")
+    ax.set_xlabel("mission time (h)")
+    save(fig, "command_trace.png")
+
+    ideal = {"navigation.model": "perfect", "errors.attitude_urad": 0.0}
+    ideal["navigation.knowledge_position_km"] = [0.0, 0.0, 0.0]
+    ideal["navigation.knowledge_velocity_mps"] = 0.0
+    cases = (
+        ("variable N (N0 = 8, k = 2), Fig. 7", 8.0, 2.0),
+        ("constant N = 3, Fig. 8", 3.0, 0.0),
+        ("constant N = 8, Fig. 9", 8.0, 0.0),
+    )
+    fig, axes = plt.subplots(3, 1, figsize=(10, 10), sharex=True)
+    for ax, (title, n0, k) in zip(axes, cases):
+        sc = scenario.with_overrides({**ideal, "guidance.n0": n0, "guidance.k": k})
+        o, tr = simulate_one(sc, index=0, seed=0)
+        _, law_k = SYSTEMS["pn"].build(sc)
+        _pn_command_panel(
+            ax,
+            tr,
+            law_k,
+            f"{title}: {int(o.firings)} firings, Δv {float(o.dv_mps):.2f} m/s, "
+            f"miss {float(o.miss_m):.2f} m (error-free)",
+        )
+    axes[-1].set_xlabel("mission time (h)")
+    save(fig, "command_laws.png")
+
+    fig, ax = plt.subplots(figsize=(6.4, 6.0))
+    bt, br = runs["miss_t_m"][ok], runs["miss_r_m"][ok]
+    ax.scatter(bt, br, s=4, alpha=0.5, label=f"impacts ({ok.sum()})")
+    ax.plot(0, 0, "r+", ms=14, mew=2, label="target centre")
+    if ok.sum() > 2 and np.std(br) > 0:
+        cov = np.cov(np.stack([bt, br]))
+        for kk, style in ((1, "-"), (3, "--")):
+            xy = _ellipse_xy(np.array([bt.mean(), br.mean()]), cov, kk)
+            ax.plot(xy[0], xy[1], "k" + style, lw=1, label=f"{kk}σ ellipse")
+    ax.set_xlabel("B·T (m)")
+    ax.set_ylabel("B·R (m)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_title(
+        f"{scenario.name}: B-plane misses (seed 004 Fig. 10)\n"
+        f"RMS {summary.get('miss_rms_m', np.nan):.1f} m, "
+        f"max {summary.get('miss_max_m', np.nan):.1f} m"
+    )
+    ax.legend(loc="upper right", fontsize=8)
+    ax.grid(alpha=0.3)
+    save(fig, "b_plane.png")
+
+    fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(14, 3.8))
+    a1.hist(runs["miss_m"][ok], bins=40, color="C2")
+    a1.set_xlabel("miss (m)")
+    a1.set_ylabel("runs")
+    a2.hist(runs["dv_mps"][ok], bins=40, color="C0")
+    a2.axvline(summary.get("dv_mean_mps", np.nan), color="k", ls="--", label="mean")
+    a2.set_xlabel("total Δv (m/s)")
+    a2.legend()
+    f = runs["firings"][ok].astype(int)
+    counts = np.bincount(f) if f.size else np.zeros(1)
+    a3.bar(np.arange(len(counts)), counts, color="C1")
+    a3.set_xlabel("firings (pulse trains)")
+    fig.suptitle(f"{scenario.name}: miss, Δv and firings ({ok.sum()} runs)")
+    save(fig, "dv_firings.png")
+    return files
+
+
+FIGURES["pn"] = _pn_figures
+
+
 def report(run_dir, out_dir=None) -> list[str]:
     """Write the PNG figures of a study directory; returns their paths.
 

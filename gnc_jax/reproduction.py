@@ -45,6 +45,7 @@ LABELS = {
     "miss_mean_m": "miss mean (m)",
     "los_error_rms_urad_mean": "LOS meas. error RMS (µrad)",
 }
+LABELS.update({"firings_mean": "firings (mean)", "miss_mean_m": "miss mean (m)"})
 
 
 def comparison_rows(summary: dict) -> list[tuple[str, str, str]]:

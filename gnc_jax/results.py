@@ -149,6 +149,28 @@ def _midcourse_stats(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]
 STATS = {"impactor": _impactor_stats, "capsule": _capsule_stats, "midcourse": _midcourse_stats}
 
 
+def _pn_stats(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
+    """Seed 004: miss (B-plane), total Δv, firings (pulse trains), as the impactor plus extras."""
+    if not ok.any():
+        return {}
+    out = _impactor_stats(o, ok)
+    miss = o["miss_m"][ok]
+    out.update(
+        miss_std_m=float(np.std(miss)),
+        miss_t_std_m=float(np.std(o["miss_t_m"][ok])),
+        miss_r_std_m=float(np.std(o["miss_r_m"][ok])),
+        dv_min_mps=float(np.min(o["dv_mps"][ok])),
+        ignitions_mean=float(np.mean(o["ignitions"][ok])),
+        pulses_mean=float(np.mean(o["pulses"][ok])),
+        last_firing_s_mean=float(np.mean(o["last_firing_s"][ok])),
+        nav_position_error_m_rms=float(np.sqrt(np.mean(o["nav_position_error_m"][ok] ** 2))),
+    )
+    return out
+
+
+STATS["pn"] = _pn_stats
+
+
 def summarize(study) -> dict[str, Any]:
     """The ``summary.json`` content of a study."""
     status = study.outcomes["status"]

@@ -48,6 +48,30 @@ BAD_INPUT = [
         "dynamics.sun_direction: must be non-zero",
     ),
 ]
+APN = "bennu-apn"
+BAD_INPUT += [
+    (["run", APN, "--set", "guidance.trigger_off=2"], "guidance.trigger_off: 2 >= trigger_on"),
+    (["run", APN, "--set", "guidance.n0=-1"], "guidance.n0: -1"),
+    (["run", APN, "--set", "guidance.k=11"], "guidance.k: 11"),
+    (["run", APN, "--set", "spacecraft.pulse_width_s=2"], "spacecraft.pulse_width_s: 2 > guid"),
+    (["run", APN, "--set", "navigation.model=kalman"], "navigation.model: got 'kalman'"),
+    (["run", APN, "--set", "approach.geometry=spherical"], "approach.geometry: got"),
+    (["run", APN, "--set", "guidance.coast_s=1e6"], "guidance.coast_s: 1e+06"),
+    (["run", APN, "--set", "guidance.coast_s=0"], "guidance.coast_s: 0"),
+    (
+        ["run", APN, "--set", "navigation.image_interval_s=1.5"],
+        "navigation.image_interval_s: 1.5 s is not a whole multiple",
+    ),
+    (
+        ["run", APN, "--set", "approach.impactor_position_km=[1.34176e8, 9.36358e5, 5.0]"],
+        "approach.impactor_position_km: z = 5 in a planar scenario",
+    ),
+    (
+        ["run", APN, "--set", "approach.impactor_velocity_kmps=[0.0, 44.0, 0.0]"],
+        "approach.impactor_velocity_kmps: the impactor must close",
+    ),
+    (["run", APN, "--set", "navigation.knowledge_position_km=[1.0, 2.0]"], "expected 3 numbers"),
+]
 
 
 @pytest.mark.parametrize("argv,message", BAD_INPUT)
@@ -177,3 +201,35 @@ def test_reproduce_side_by_side(tmp_path, capsys, monkeypatch):
     md = (tmp_path / "reproduce.md").read_text()
     assert "| `deep-impact-los` | 4 | miss RMS (m) | 90.1 |" in md
     assert pathlib.Path(tmp_path / "deep-impact-predictive" / "summary.json").is_file()
+
+
+def test_pn_run_writes_results_and_report(tmp_path, capsys):
+    out = tmp_path / "apn"
+    short = [
+        "approach.impactor_position_km=[1.3417501e8, 20400.0, 0.0]",
+        "guidance.coast_s=60.0",
+        "navigation.knowledge_position_km=[2.0, 0.2, 0.2]",
+    ]
+    argv = ["run", "bennu-apn", "--runs", "4", "--out", str(out), "--no-progress"]
+    assert cli.main(argv + [x for s in short for x in ("--set", s)]) == 0
+    printed = capsys.readouterr().out
+    assert "miss_rms_m" in printed and "paper vs gnc_jax" in printed and "83.4" in printed
+    summary = json.loads((out / "summary.json").read_text())
+    for key in ("miss_rms_m", "miss_max_m", "dv_mean_mps", "firings_mean", "ignitions_mean"):
+        assert key in summary, key
+    table = pq.read_table(out / "runs.parquet")
+    assert {"miss_t_m", "miss_r_m", "dv_mps", "firings", "status_name"} <= set(table.column_names)
+    assert cli.main(["report", str(out)]) == 0
+    for name in ("command_trace.png", "command_laws.png", "b_plane.png", "dv_firings.png"):
+        png = out / name
+        assert png.is_file() and png.read_bytes()[:4] == b"\x89PNG" and png.stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("name", [n for n in gj.scenario.packaged_names() if n.startswith("bennu")])
+def test_pn_scenarios_load_with_paper_rows(name):
+    from gnc_jax.reproduction import LABELS
+
+    sc = gj.load_scenario(name)
+    assert sc.kind == "pn" and sc.paper
+    for key in sc.paper:
+        assert key in LABELS, key

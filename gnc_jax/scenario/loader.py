@@ -7,11 +7,12 @@ import pathlib
 import tomllib
 from typing import Any
 
-from . import capsule, impactor, midcourse
+from . import capsule, impactor, midcourse, pn
 from .schema import ScenarioError, parse_override, validate
 
 #: scenario kind -> module with ``SCHEMA`` and ``check(config)``
 KINDS = {"impactor": impactor, "capsule": capsule, "midcourse": midcourse}
+KINDS["pn"] = pn
 
 _META_FIELDS = {"name", "kind", "description", "reference", "runs", "seed"}
 

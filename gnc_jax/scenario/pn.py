@@ -1,0 +1,211 @@
+"""Scenario fields of the variable-coefficient augmented PN intercept (seed 004; SPEC §6).
+
+File units follow the paper (km, km/s, AU, deg, urad) and are converted to SI when the
+simulation is built; the field names carry the units. Where the paper is silent (engine,
+guidance step, pulse width, trigger thresholds, navigation sensor rate) the defaults and their
+reasons are given in the field docs and in README "Augmented PN".
+"""
+
+import math
+
+from .schema import Field, ScenarioError
+
+F = Field
+
+SCHEMA = {
+    "approach": {
+        "geometry": F(
+            "str",
+            "planar",
+            choices=("planar", "bennu-3d"),
+            doc="planar: seed 004 Table 2 states as given (z = 0); bennu-3d: the target from "
+            "the Table 1 elements and the Table 2 relative state rotated into its (radial, "
+            "transverse, normal) frame",
+        ),
+        "target_position_km": F(
+            "floats", [1.34175e8, 0.0, 0.0], length=3, units="km", doc="Table 2 (planar)"
+        ),
+        "target_velocity_kmps": F(
+            "floats", [0.0, 34.50561, 0.0], length=3, units="km/s", doc="Table 2 (planar)"
+        ),
+        "impactor_position_km": F(
+            "floats", [1.34176e8, 9.36358e5, 0.0], length=3, units="km", doc="Table 2"
+        ),
+        "impactor_velocity_kmps": F(
+            "floats", [0.0, 24.30561, 0.0], length=3, units="km/s", doc="Table 2"
+        ),
+        "semi_major_axis_au": F("float", 1.12639, lo=0.0, lo_open=True, hi=100.0, units="AU"),
+        "eccentricity": F("float", 0.20375, lo=0.0, hi=0.99),
+        "inclination_deg": F("float", 6.03494, lo=0.0, hi=180.0, units="deg"),
+        "raan_deg": F("float", 2.06087, lo=-360.0, hi=360.0, units="deg"),
+        "arg_perihelion_deg": F("float", 66.22307, lo=-360.0, hi=360.0, units="deg"),
+        "true_anomaly_deg": F("float", 101.70395, lo=-360.0, hi=360.0, units="deg"),
+    },
+    "dynamics": {
+        "mu_sun_m3s2": F("float", 1.32715e20, lo=0.0, lo_open=True, hi=1e22, units="m^3/s^2"),
+        "mu_target_m3s2": F(
+            "float",
+            4.892,
+            lo=0.0,
+            hi=1e12,
+            units="m^3/s^2",
+            doc="Bennu GM (Scheeres et al. 2019); 0 = no target gravity",
+        ),
+        "target_radius_m": F(
+            "float", 245.0, lo=0.0, lo_open=True, hi=1e7, units="m", doc="homogeneous sphere"
+        ),
+    },
+    "spacecraft": {
+        "mass_kg": F("float", 372.0, lo=0.0, lo_open=True, hi=1e5, units="kg", doc="seed 000"),
+        "thrust_n": F("float", 88.0, lo=0.0, lo_open=True, hi=1e4, units="N", doc="seed 000"),
+        "isp_s": F("float", 230.0, lo=0.0, lo_open=True, hi=1e4, units="s"),
+        "pulse_width_s": F(
+            "float",
+            0.05,
+            lo=0.0,
+            lo_open=True,
+            hi=60.0,
+            units="s",
+            doc="engine on-time per control step while the trigger is on (minimum impulse "
+            "bit = thrust x pulse width); must not exceed guidance.dt_s",
+        ),
+    },
+    "guidance": {
+        "n0": F("float", 8.0, lo=0.0, lo_open=True, hi=100.0, doc="N0 of eq. 12"),
+        "k": F("float", 2.0, lo=0.0, hi=10.0, doc="exponent k of eq. 12; 0 = constant N = n0"),
+        "n_min": F("float", 2.0, lo=0.0, hi=100.0, doc="lower bound of N (eq. 12: 2)"),
+        "coast_s": F(
+            "float",
+            600.0,
+            lo=0.0,
+            lo_open=True,
+            units="s",
+            doc="no firing in the last coast_s (paper: 10 min)",
+        ),
+        "dt_s": F(
+            "float", 1.0, lo=0.0, lo_open=True, hi=60.0, units="s", doc="guidance/control step"
+        ),
+        "trigger_on": F(
+            "float",
+            1.0,
+            lo=0.0,
+            lo_open=True,
+            hi=1e6,
+            doc="Schmitt on-threshold a_on in units of a_ref = n_min x (minimum impulse bit) / "
+            "coast_s, the command change one pulse causes at the start of the coast",
+        ),
+        "trigger_off": F(
+            "float",
+            0.5,
+            lo=0.0,
+            lo_open=True,
+            hi=1e6,
+            doc="Schmitt off-threshold a_off in units of a_ref; trigger_off < trigger_on",
+        ),
+        "temperature": F(
+            "float", 0.05, lo=0.0, lo_open=True, hi=10.0, doc="relaxed trigger (gradients only)"
+        ),
+        "coast_steps": F(
+            "int", 60, lo=1, hi=100000, doc="RK4 steps of the final unpowered coast to the B-plane"
+        ),
+    },
+    "navigation": {
+        "model": F(
+            "str",
+            "ekf",
+            choices=("ekf", "perfect"),
+            doc="ekf: camera LOS angles + EKF (navigation/ekf.py); perfect: the true state",
+        ),
+        "image_interval_s": F(
+            "float",
+            1.0,
+            lo=0.0,
+            lo_open=True,
+            hi=3600.0,
+            units="s",
+            doc="LOS measurement interval; a whole multiple of guidance.dt_s (paper: every "
+            "guidance step, Fig. 4)",
+        ),
+        "knowledge_position_km": F(
+            "floats",
+            [100.0, 10.0, 10.0],
+            length=3,
+            lo=0.0,
+            hi=1e6,
+            units="km",
+            doc="1-sigma initial position knowledge along the LOS, across it in the orbit "
+            "plane, and out of plane (Table 4: (100, 10); planar runs ignore the third)",
+        ),
+        "knowledge_velocity_mps": F(
+            "float", 0.1, lo=0.0, hi=1e3, units="m/s", doc="1-sigma per axis (Table 4)"
+        ),
+        "process_noise_m2s3": F("float", 1e-18, lo=0.0, hi=1.0, units="m^2/s^3"),
+    },
+    "errors": {
+        "attitude_urad": F(
+            "float",
+            320.0,
+            lo=0.0,
+            hi=1e5,
+            units="urad",
+            doc="1-sigma attitude measurement error (Table 4): white on every LOS measurement, "
+            "and the thrust pointing error of each firing",
+        ),
+    },
+}
+
+
+def time_of_flight_s(cfg: dict) -> float:
+    """Straight-line time of flight (s) of the Table 2 relative state."""
+    a = cfg["approach"]
+    r = [1e3 * (s - t) for s, t in zip(a["impactor_position_km"], a["target_position_km"])]
+    v = [1e3 * (s - t) for s, t in zip(a["impactor_velocity_kmps"], a["target_velocity_kmps"])]
+    vv = sum(x * x for x in v)
+    return -sum(x * y for x, y in zip(r, v)) / vv if vv > 0 else -1.0
+
+
+def check(cfg: dict) -> None:
+    """Cross-field checks of a validated pn configuration."""
+    a, g, sc, nv = cfg["approach"], cfg["guidance"], cfg["spacecraft"], cfg["navigation"]
+    if math.hypot(*a["target_position_km"]) == 0.0:
+        raise ScenarioError(
+            "approach.target_position_km: [0, 0, 0]; allowed: a non-zero heliocentric position"
+        )
+    if a["geometry"] == "planar":
+        for name in (
+            "target_position_km",
+            "target_velocity_kmps",
+            "impactor_position_km",
+            "impactor_velocity_kmps",
+        ):
+            if a[name][2] != 0.0:
+                raise ScenarioError(
+                    f"approach.{name}: z = {a[name][2]:g} in a planar scenario; allowed: z = 0 "
+                    "(or approach.geometry = 'bennu-3d')"
+                )
+    tof = time_of_flight_s(cfg)
+    if tof <= 0.0:
+        raise ScenarioError(
+            "approach.impactor_velocity_kmps: the impactor must close on the target; allowed: "
+            "a relative velocity with (relative position . relative velocity) < 0"
+        )
+    if not g["coast_s"] < tof:
+        raise ScenarioError(
+            f"guidance.coast_s: {g['coast_s']:g}; allowed: [0, {tof:.6g}) s (time of flight)"
+        )
+    if g["trigger_off"] >= g["trigger_on"]:
+        raise ScenarioError(
+            f"guidance.trigger_off: {g['trigger_off']:g} >= trigger_on = {g['trigger_on']:g}; "
+            "allowed: 0 < trigger_off < trigger_on"
+        )
+    if sc["pulse_width_s"] > g["dt_s"]:
+        raise ScenarioError(
+            f"spacecraft.pulse_width_s: {sc['pulse_width_s']:g} > guidance.dt_s = "
+            f"{g['dt_s']:g}; allowed: (0, dt_s]"
+        )
+    ratio = nv["image_interval_s"] / g["dt_s"]
+    if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+        raise ScenarioError(
+            f"navigation.image_interval_s: {nv['image_interval_s']:g} s is not a whole "
+            f"multiple of guidance.dt_s = {g['dt_s']:g} s; allowed: n x dt_s, n >= 1"
+        )

@@ -1,0 +1,123 @@
+"""Closed-loop seed 004 intercept: batching and keys, Table 3 ordering, gradients, 3-D geometry,
+and the paper-scale Monte Carlo (reduced in CI)."""
+
+import dataclasses
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import gnc_jax as gj
+from gnc_jax.simulation.pn import build, initial_state, simulate
+
+# A 2000 s approach (20 400 km, 10 km off) with proportionally smaller errors: same code paths.
+SHORT = [
+    "approach.impactor_position_km=[1.3417501e8, 20400.0, 0.0]",
+    "guidance.coast_s=60.0",
+    "navigation.knowledge_position_km=[2.0, 0.2, 0.2]",
+]
+
+
+@pytest.fixture(scope="module", params=["bennu-apn", "bennu-apn-3d"])
+def short_scenario(request):
+    return gj.load_scenario(request.param, overrides=SHORT)
+
+
+def test_vmapped_batch_equals_per_run_loop():
+    short_scenario = gj.load_scenario("bennu-apn", overrides=SHORT)
+    study = gj.run_study(short_scenario, runs=6, seed=3, progress=False)
+    assert study.summary()["failed"] == 0
+    for i in range(6):
+        one, _ = gj.simulate_one(short_scenario, index=i, seed=3, record=False)
+        for name in ("miss_m", "miss_t_m", "miss_r_m", "dv_mps", "nav_position_error_m"):
+            np.testing.assert_allclose(
+                study.outcomes[name][i], getattr(one, name), rtol=1e-9, atol=1e-9
+            )
+        assert study.outcomes["firings"][i] == one.firings
+    # results do not depend on chunking or the device count
+    other = gj.run_study(short_scenario, runs=6, seed=3, chunk_size=2, n_devices=1, progress=False)
+    np.testing.assert_allclose(other.outcomes["miss_m"], study.outcomes["miss_m"], rtol=1e-9)
+
+
+def test_guidance_removes_the_delivery_error(short_scenario):
+    s = gj.run_study(short_scenario, runs=6, seed=0, progress=False).summary()
+    # unguided the miss is 10 km; the impulsive minimum Δv is 10 km / 2000 s = 5 m/s
+    assert s["failed"] == 0
+    assert s["miss_max_m"] < 500.0
+    assert 4.5 < s["dv_mean_mps"] < 10.0
+    if short_scenario.name == "bennu-apn-3d":
+        assert s["miss_r_std_m"] > 0.0  # out-of-plane errors: both B-plane components
+    else:
+        assert s["miss_r_std_m"] == 0.0  # planar: the miss is B_T only
+
+
+def test_3d_geometry_is_the_planar_case_on_bennus_orbit():
+    planar, _ = initial_state(gj.load_scenario("bennu-apn").config)
+    y3, is_planar = initial_state(gj.load_scenario("bennu-apn-3d").config)
+    assert not is_planar
+    # Table 1: r = a (1 - e^2) / (1 + e cos nu), out of the ecliptic by the inclination
+    a, e, nu = 1.12639 * 1.495978707e11, 0.20375, np.radians(101.70395)
+    assert float(jnp.linalg.norm(y3.r_target)) == pytest.approx(
+        a * (1 - e * e) / (1 + e * np.cos(nu)), rel=1e-12
+    )
+    h = np.cross(np.asarray(y3.r_target), np.asarray(y3.v_target))
+    assert np.degrees(np.arccos(h[2] / np.linalg.norm(h))) == pytest.approx(6.03494, rel=1e-9)
+    for a_, b_ in ((y3.r, planar.r), (y3.v, planar.v)):
+        assert float(jnp.linalg.norm(a_)) == pytest.approx(float(jnp.linalg.norm(b_)), rel=1e-12)
+    assert float(y3.r @ y3.v) == pytest.approx(float(planar.r @ planar.v), rel=1e-12)
+
+
+def test_table3_error_free_ordering():
+    """Seed 004 Table 3: variable N (N0 = 8, k = 2) against constant N = 3 and N = 8."""
+    res = {}
+    for name in ("bennu-apn-ideal", "bennu-pn3-ideal", "bennu-pn8-ideal"):
+        out, _ = gj.simulate_one(gj.load_scenario(name), record=False)
+        assert out.status == gj.Status.ok
+        res[name] = out
+    apn, pn3, pn8 = (res[n] for n in ("bennu-apn-ideal", "bennu-pn3-ideal", "bennu-pn8-ideal"))
+    for out in (apn, pn3, pn8):
+        assert out.miss_m <= 10.0
+        # never below the impulsive minimum: 1004 km unguided miss / 91 800 s
+        assert out.dv_mps > 10.9
+    assert apn.firings < pn3.firings < pn8.firings
+    assert apn.dv_mps < pn8.dv_mps and pn3.dv_mps < pn8.dv_mps
+    # The paper's 27 % saving of the variable law over N = 3 is not reproduced: with the
+    # thresholds derived from the engine both use the impulsive minimum plus ~8 %.
+    assert abs(apn.dv_mps - pn3.dv_mps) < 0.01 * pn3.dv_mps
+
+
+def test_gradient_of_smoothed_miss_and_dv_matches_finite_differences():
+    scenario = gj.load_scenario("bennu-apn", overrides=SHORT)
+    sim, law = build(scenario)
+    law = dataclasses.replace(law, temperature=jnp.asarray(0.2), relaxed=True)
+
+    @jax.jit
+    def objective(gains):
+        tuned = eqx.tree_at(lambda l: (l.n0, l.k), law, (gains[0], gains[1]))
+        out = jax.vmap(lambda i: simulate(sim, tuned, gj.run_key(1, i))[0])(jnp.arange(2))
+        return jnp.mean(jnp.sqrt(out.miss_m**2 + 1.0)) + 10.0 * jnp.mean(out.dv_mps)
+
+    gains = jnp.array([8.0, 2.0])
+    grad = np.asarray(jax.jit(jax.grad(objective))(gains))
+    assert np.all(np.isfinite(grad)) and np.abs(grad).max() > 0.0
+    h = 1e-4
+    fd = np.array(
+        [(objective(gains + h * e) - objective(gains - h * e)) / (2 * h) for e in np.eye(2)]
+    )
+    np.testing.assert_allclose(grad, fd, rtol=2e-3, atol=1e-6 * np.abs(fd).max())
+
+
+@pytest.mark.slow
+def test_paper_scale_monte_carlo(paper_scale):
+    """Issue 5 acceptance: miss RMS <= 150 m, Δv mean <= 20 m/s (paper: 83.4 m, 9.56 m/s).
+
+    2000 runs with --paper-scale; 60 in CI (the RMS of 60 runs is within ~20 % of the 2000's).
+    """
+    runs = 2000 if paper_scale else 60
+    s = gj.run_study(gj.load_scenario("bennu-apn"), runs=runs, seed=0, progress=False).summary()
+    assert s["failed"] == 0
+    assert s["miss_rms_m"] <= 150.0
+    assert s["dv_mean_mps"] <= 20.0
+    assert s["miss_max_m"] <= 600.0
