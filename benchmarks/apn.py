@@ -14,18 +14,10 @@ import time
 
 import jax
 import jax.numpy as jnp
+from _timing import best_of  # benchmarks/_timing.py
 
 import gnc_jax as gj  # first: float64 and one XLA device per core
 from gnc_jax.montecarlo import SYSTEMS, batch_function
-
-
-def best_of(fn, repeats):
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        jax.block_until_ready(fn())
-        times.append(time.perf_counter() - t0)
-    return min(times)
 
 
 def main():

@@ -24,21 +24,13 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
+from _timing import best_of  # benchmarks/_timing.py
 
 import gnc_jax as gj  # first: float64 and one XLA device per core
 from gnc_jax.dynamics.entry import EntryArgs, entry_vector_field
 from gnc_jax.integrate import rk4_step
 from gnc_jax.montecarlo import SYSTEMS, batch_function
 from gnc_jax.simulation.capsule import dispersed_entry
-
-
-def best_of(fn, repeats):
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        jax.block_until_ready(fn())
-        times.append(time.perf_counter() - t0)
-    return min(times)
 
 
 def bare_rate(sim, n_runs, n_steps, repeats):

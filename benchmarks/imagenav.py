@@ -16,20 +16,12 @@ import time
 
 import jax
 import jax.numpy as jnp
+from _timing import best_of  # benchmarks/_timing.py
 
 import gnc_jax as gj  # first: float64 and one XLA device per core
 from gnc_jax.navigation.centroid import extract_centroid
 from gnc_jax.navigation.render import choose_binning, render_frame, roi_to_tangent
 from gnc_jax.simulation.impactor import build
-
-
-def best_of(fn, repeats):
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        jax.block_until_ready(fn())
-        times.append(time.perf_counter() - t0)
-    return min(times)
 
 
 def main():

@@ -16,6 +16,7 @@ import time
 
 import jax
 import jax.numpy as jnp
+from _timing import best_of  # benchmarks/_timing.py
 
 import gnc_jax as gj  # first: float64 and one XLA device per core
 from gnc_jax.simulation import midcourse
@@ -25,15 +26,6 @@ SCENARIOS = {
     "central_difference": "phoenix-midcourse-cd",
     "stm": "phoenix-midcourse-stm",
 }
-
-
-def best_of(fn, repeats):
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        jax.block_until_ready(fn())
-        times.append(time.perf_counter() - t0)
-    return min(times)
 
 
 def dispersed_states(sim, n, seed=0):
