@@ -16,6 +16,17 @@ def _plt():
     return plt
 
 
+def _saver(plt, out: pathlib.Path, files: list):
+    """``save(fig, name)``: write ``out/name`` at 120 dpi, close the figure, record the path."""
+
+    def save(fig, name):
+        files.append(out / name)
+        fig.savefig(files[-1], dpi=120, bbox_inches="tight")
+        plt.close(fig)
+
+    return save
+
+
 def _ellipse_xy(mean, cov, k, n=200):
     """Points of the k-sigma ellipse of a 2-D covariance (seed 000 eq. 17)."""
     vals, vecs = np.linalg.eigh(cov)
@@ -181,10 +192,7 @@ def _midcourse_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathl
     ok = runs["status"] == Status.ok
     files = []
 
-    def save(fig, name):
-        files.append(out / name)
-        fig.savefig(files[-1], dpi=120, bbox_inches="tight")
-        plt.close(fig)
+    save = _saver(plt, out, files)
 
     goal_km = scenario.config["goal"]["b_km"]
     fig, axes = plt.subplots(1, 2, figsize=(11, 5))
@@ -306,10 +314,7 @@ def _capsule_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib
     plt = _plt()
     files = []
 
-    def save(fig, name):
-        files.append(out / name)
-        fig.savefig(files[-1], dpi=120, bbox_inches="tight")
-        plt.close(fig)
+    save = _saver(plt, out, files)
 
     ok = runs["status"] == Status.ok
     n_ok = int(ok.sum())
@@ -466,10 +471,7 @@ def _pn_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib.Path
     ok = runs["status"] == Status.ok
     files = []
 
-    def save(fig, name):
-        files.append(out / name)
-        fig.savefig(files[-1], dpi=120, bbox_inches="tight")
-        plt.close(fig)
+    save = _saver(plt, out, files)
 
     # Run 0 of the study, then the three laws of Table 3 error-free from the same scenario.
     _, law = SYSTEMS["pn"].build(scenario)

@@ -32,7 +32,7 @@ def _impactor_stats(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
     if miss.size == 0:
         return {}
     counts = np.bincount(firings)
-    return dict(
+    out = dict(
         miss_rms_m=float(np.sqrt(np.mean(miss**2))),
         miss_mean_m=float(np.mean(miss)),
         miss_max_m=float(np.max(miss)),
@@ -47,10 +47,14 @@ def _impactor_stats(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
         firings_mode=int(np.argmax(counts)),
         firings_histogram={int(k): int(v) for k, v in enumerate(counts) if v},
         fuel_mean_kg=float(np.mean(o["fuel_kg"][ok])),
-        los_error_rms_urad_mean=float(np.mean(o["los_error_rms_urad"][ok])),
-        images_rejected_max=int(np.max(o["images_rejected"][ok])),
-        images_rejected_mean=float(np.mean(o["images_rejected"][ok])),
     )
+    if "los_error_rms_urad" in o:  # the seed 000/002 navigation chain (not the pn kind)
+        out.update(
+            los_error_rms_urad_mean=float(np.mean(o["los_error_rms_urad"][ok])),
+            images_rejected_max=int(np.max(o["images_rejected"][ok])),
+            images_rejected_mean=float(np.mean(o["images_rejected"][ok])),
+        )
+    return out
 
 
 def _interval(x: np.ndarray) -> dict[str, Any]:

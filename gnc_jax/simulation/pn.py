@@ -33,6 +33,7 @@ from ..dynamics.intercept import InterceptDynamics, InterceptState, coast_to_b_p
 from ..guidance.apn import AugmentedPNGuidance, PNGuidanceContext, PNNavigation
 from ..navigation.camera import camera_attitude, los_angles
 from ..navigation.ekf import NavEstimate, propagate_covariance, propagate_state, update_los
+from .impactor import _normal, _safe_norm  # the same draws and |Δv| as the seed 000 loop
 
 
 class PNErrors(eqx.Module):
@@ -115,16 +116,6 @@ class _Carry(NamedTuple):
 
 
 _KNOW_POS, _KNOW_VEL, _IMAGES, _STEPS = range(4)
-
-
-def _safe_norm(x):
-    n2 = jnp.dot(x, x)
-    ok = n2 > 0.0
-    return jnp.where(ok, jnp.sqrt(jnp.where(ok, n2, 1.0)), 0.0)
-
-
-def _normal(key, stream, shape=(3,)):
-    return jax.random.normal(jax.random.fold_in(key, stream), shape)
 
 
 def trigger_scale(thrust_n, mass_kg, pulse_width_s, n_min, coast_s):
