@@ -134,3 +134,20 @@ def test_capsule_report_writes_the_paper_figures(capsule_scenario, tmp_path):
         "bank_histories.png",
     }
     assert all((tmp_path / n).stat().st_size > 10_000 for n in names)
+
+
+@pytest.mark.slow
+def test_paper_scale_skip_entry(capsule_scenario, paper_scale):
+    """Issue 3 acceptance: every run ok, chute 3σ (mean ± 3 std) inside ±2.5 km downrange and
+    crossrange, switch speed and altitude within 10 % of the paper's 7350 m/s and 78.66 km.
+
+    1000 runs with --paper-scale; 100 in CI (a 3σ interval of 100 runs is looser but the
+    limits are 2.5× the 1000-run result)."""
+    runs = 1000 if paper_scale else 100
+    s = gj.run_study(capsule_scenario, runs=runs, seed=0, progress=False).summary()
+    assert s["failed"] == 0 and s["runs"] == runs
+    for name in ("downrange_err_km", "crossrange_err_km"):
+        lo, hi = s[name]["three_sigma"]
+        assert -2.5 <= lo and hi <= 2.5, (name, lo, hi)
+    assert abs(s["switch_speed_mps_mean"] / 7350.0 - 1.0) < 0.10
+    assert abs(s["switch_altitude_km_mean"] / 78.66 - 1.0) < 0.10
