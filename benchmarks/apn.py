@@ -10,14 +10,12 @@ by run, measured in the same process and printed as a ratio.
 """
 
 import argparse
-import time
 
 import jax
-import jax.numpy as jnp
-from _timing import best_of  # benchmarks/_timing.py
+from _timing import python_loop_rate, time_batch  # benchmarks/_timing.py
 
 import gnc_jax as gj  # first: float64 and one XLA device per core
-from gnc_jax.montecarlo import SYSTEMS, batch_function
+from gnc_jax.montecarlo import SYSTEMS
 
 
 def main():
@@ -31,19 +29,12 @@ def main():
     scenario = gj.load_scenario(args.scenario)
     system = SYSTEMS[scenario.kind]
     sim, law = system.build(scenario)
-    seed = jnp.asarray(0, jnp.uint32)
     print(
         f"# {scenario.name}: {sim.n_images * sim.steps_per_image} guidance steps per run, "
         f"navigation {sim.nav_model}; {len(jax.devices())} XLA host devices; jax {jax.__version__}"
     )
 
-    single = jax.jit(lambda s, l, k: system.simulate(s, l, k)[0])
-    t0 = time.perf_counter()
-    jax.block_until_ready(single(sim, law, gj.run_key(0, 0)))
-    loop_compile = time.perf_counter() - t0
-    keys = [gj.run_key(0, i) for i in range(args.loop_runs)]
-    loop_s = best_of(lambda: [single(sim, law, k) for k in keys], 2)
-    loop_rate = args.loop_runs / loop_s
+    loop_compile, loop_rate = python_loop_rate(system, sim, law, args.loop_runs)
     print(f"python loop of jit(simulate): compile {loop_compile:.2f} s, {loop_rate:.2f} traj/s")
     print()
     print("| N | devices | compile (s) | run (s) | trajectories/s | vs Python loop |")
@@ -52,13 +43,8 @@ def main():
         for n_dev in sorted({1, len(jax.devices())}):
             if n % n_dev:
                 continue
-            fn, _ = batch_function(system, n_dev)
-            idx = jnp.arange(n)
-            t0 = time.perf_counter()
-            compiled = fn.lower(sim, law, seed, idx).compile()
-            compile_s = time.perf_counter() - t0
             repeats = args.repeats if n < 500 else 1
-            run_s = best_of(lambda c=compiled, i=idx: c(sim, law, seed, i), repeats)
+            _, compile_s, run_s = time_batch(system, sim, law, n, n_dev, repeats)
             rate = n / run_s
             print(
                 f"| {n} | {n_dev} | {compile_s:.2f} | {run_s:.3f} | {rate:,.2f} | "

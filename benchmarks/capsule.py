@@ -24,12 +24,12 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _timing import best_of  # benchmarks/_timing.py
+from _timing import best_of, python_loop_rate, time_batch  # benchmarks/_timing.py
 
 import gnc_jax as gj  # first: float64 and one XLA device per core
 from gnc_jax.dynamics.entry import EntryArgs, entry_vector_field
 from gnc_jax.integrate import rk4_step
-from gnc_jax.montecarlo import SYSTEMS, batch_function
+from gnc_jax.montecarlo import SYSTEMS
 from gnc_jax.simulation.capsule import dispersed_entry
 
 
@@ -71,7 +71,6 @@ def main():
     scenario = gj.load_scenario(args.scenario)
     system = SYSTEMS[scenario.kind]
     sim, law = system.build(scenario)
-    seed = jnp.asarray(0, jnp.uint32)
     truth_evals = 4 * sim.n_control * sim.substeps
     print(
         f"# {scenario.name}: {sim.n_control} control steps x {sim.substeps} truth RK4 steps "
@@ -83,13 +82,7 @@ def main():
     print(f"bare vmapped RK4 scan of the truth dynamics (1000 runs): compile {bare_compile:.2f} s,")
     print(f"  {bare:.3g} right-hand-side evaluations/s")
 
-    single = jax.jit(lambda s, l, k: system.simulate(s, l, k)[0])
-    t0 = time.perf_counter()
-    jax.block_until_ready(single(sim, law, gj.run_key(0, 0)))
-    loop_compile = time.perf_counter() - t0
-    keys = [gj.run_key(0, i) for i in range(args.loop_runs)]
-    loop_s = best_of(lambda: [single(sim, law, k) for k in keys], 2)
-    loop_rate = args.loop_runs / loop_s
+    loop_compile, loop_rate = python_loop_rate(system, sim, law, args.loop_runs)
     print(f"python loop of jit(simulate): compile {loop_compile:.2f} s, {loop_rate:.2f} traj/s")
     print()
     print(
@@ -99,15 +92,8 @@ def main():
     print("|---:|---:|---:|---:|---:|---:|---:|---:|")
     for n in args.sizes:
         n_dev = len(jax.devices()) if n % len(jax.devices()) == 0 else 1
-        fn, _ = batch_function(system, n_dev)
-        idx = jnp.arange(n)
-        t0 = time.perf_counter()
-        compiled = fn.lower(sim, law, seed, idx).compile()
-        compile_s = time.perf_counter() - t0
-        out = jax.block_until_ready(compiled(sim, law, seed, idx))
-        run_s = best_of(
-            lambda c=compiled, i=idx: c(sim, law, seed, i), args.repeats if n <= 1000 else 1
-        )
+        repeats = args.repeats if n <= 1000 else 1
+        out, compile_s, run_s = time_batch(system, sim, law, n, n_dev, repeats)
         evals = n * truth_evals + 4 * float(np.sum(np.asarray(out.predictor_steps)))
         rate = n / run_s
         print(
