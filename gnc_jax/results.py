@@ -32,7 +32,7 @@ def _impactor_stats(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
     if miss.size == 0:
         return {}
     counts = np.bincount(firings)
-    out = dict(
+    return dict(
         miss_rms_m=float(np.sqrt(np.mean(miss**2))),
         miss_mean_m=float(np.mean(miss)),
         miss_max_m=float(np.max(miss)),
@@ -48,7 +48,12 @@ def _impactor_stats(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
         firings_histogram={int(k): int(v) for k, v in enumerate(counts) if v},
         fuel_mean_kg=float(np.mean(o["fuel_kg"][ok])),
     )
-    if "los_error_rms_urad" in o:  # the seed 000/002 navigation chain (not the pn kind)
+
+
+def _impactor_kind_stats(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
+    """The impactor statistics plus those of the seed 000/002 navigation front ends."""
+    out = _impactor_stats(o, ok)
+    if out:
         out.update(
             los_error_rms_urad_mean=float(np.mean(o["los_error_rms_urad"][ok])),
             images_rejected_max=int(np.max(o["images_rejected"][ok])),
@@ -150,7 +155,7 @@ def _midcourse_stats(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]
     )
 
 
-STATS = {"impactor": _impactor_stats, "capsule": _capsule_stats, "midcourse": _midcourse_stats}
+STATS = {"impactor": _impactor_kind_stats, "capsule": _capsule_stats, "midcourse": _midcourse_stats}
 
 
 def _pn_stats(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
