@@ -23,6 +23,7 @@ p_off = sigmoid((1 - |A|/a_off)/T), which tends to the hard logic as the tempera
 lets gradients reach every gain; evaluation uses the hard logic.
 """
 
+import math
 from typing import NamedTuple
 
 import equinox as eqx
@@ -155,3 +156,95 @@ class AugmentedPNGuidance(eqx.Module):
         fallback = jnp.cross(ctx.reference_normal, u)
         direction = safe_unit(a_cmd, fallback / jnp.linalg.norm(fallback))
         return EngineCommand(on * ctx.pulse_fraction, direction), APNState(on, a_cmd, n)
+
+
+class PulseTrainEstimate(NamedTuple):
+    """Closed-form cost of a pulse-fired PN law, error-free (see ``pulse_train_estimate``)."""
+
+    dv_mps: float  # total Δv
+    dv_first_mps: float  # the first pulse train (at t = 0)
+    trains: int  # pulse trains (trigger ignitions), first one included
+    train_tgo_s: tuple[float, ...]  # time to go at each later train's ignition
+    residual_zem_m: float  # zero-effort miss left after the last train
+    chatter_tgo_s: float  # below this time to go a train may reverse instead of stopping
+
+
+def pulse_train_estimate(
+    zem0_m: float,
+    tgo0_s: float,
+    n0: float,
+    k: float,
+    n_min: float,
+    a_on_mps2: float,
+    a_off_mps2: float,
+    coast_s: float,
+    engine_accel_mps2: float = math.inf,
+    impulse_bit_mps: float = 0.0,
+) -> PulseTrainEstimate:
+    """Δv and pulse trains of the Schmitt-triggered law of eqs. 11-12, error-free, in closed form.
+
+    Model: straight-line relative motion (t_go = R / V_c falls at 1 s/s, so N(t_go) =
+    max(N_min, N0 (t_go/T)^k)); the command is A = N Z / t_go^2 with Z the zero-effort miss;
+    while the trigger is on the engine fires at ``engine_accel_mps2`` (time average over
+    pulses) perpendicular to the LOS, and Δv spent at time to go t_go removes t_go of miss
+    per m/s. Then:
+
+    * the first train runs from t = 0 until A = a_off: it leaves Z1 = a_off t_e^2 / N(t_e)
+      (t_e its end) and costs (Z0 - Z1) / (T - tau/2) for a burn of duration tau;
+    * with k = 0 or k >= 2 the command does not grow while coasting until N reaches its end
+      value N_e (N0 if k = 0, else N_min); from then on A = N_e Z / t_go^2 reaches a_on at
+      t_go1 = sqrt(N_e Z1 / a_on), and each train leaves Z / rho (rho = a_on / a_off) one
+      factor sqrt(rho) of time to go later: the i-th train (t_go = t_go1 rho^(-i/2)) costs
+      Z1 rho^-i (1 - 1/rho) / t_go, a geometric series cut at the coast. Untruncated it sums
+      to sqrt(Z1 a_on / N_e) (1 + rho^-1/2).
+
+    Impulsive and uncut (T >> coast): Δv = Z0/T + a_off T [(1 + sqrt(rho)) / sqrt(N0 N_e) - 1/N0].
+    Every law pays the impulsive minimum Z0/T plus a term of order a_off T, and which of two
+    laws is cheaper depends on rho: variable N (N0 = 8, k = 2) minus constant N = 3 is
+    a_off T (1/8 - sqrt(rho)/12), so the variable law is the cheaper one only for rho > 2.25.
+
+    Not modelled: the impulse bit (a train ends up to one pulse below a_off, which delays the
+    next train), gravity gradients, and chatter: once N_e q / t_go > 2 a_off (``impulse_bit_mps``
+    = q) one pulse can drive the command from above a_off to below -a_off, so trains at a
+    time to go below ``chatter_tgo_s`` may alternate direction pulse after pulse (constant
+    N = 8 in Table 3); the estimate is a lower bound there.
+
+    Args: zem0_m, tgo0_s: Z0 and T at t = 0 (m, s); n0, k, n_min: eq. 12; a_on_mps2,
+    a_off_mps2: trigger thresholds; coast_s: no firing in the last ``coast_s`` seconds;
+    engine_accel_mps2: mean acceleration while the trigger is on (inf: impulsive trains);
+    impulse_bit_mps: one pulse's Δv q (only for ``chatter_tgo_s``).
+    """
+    if not (k == 0 or k >= 2):
+        raise ValueError(f"k = {k}: the estimate covers k = 0 and k >= 2 only")
+    if not 0 < a_off_mps2 <= a_on_mps2:
+        raise ValueError("trigger thresholds: need 0 < a_off <= a_on")
+    big_t = float(tgo0_s)
+    n_of = lambda tgo: max(n_min, n0 * (tgo / big_t) ** k)  # noqa: E731
+    n_end = n0 if k == 0 else n_min
+    rho = a_on_mps2 / a_off_mps2
+    # First train: fixed point of its duration tau (impulsive when the engine is infinite).
+    if n0 * zem0_m / big_t**2 < a_on_mps2:
+        z1, dv1, t_end = zem0_m, 0.0, big_t
+        trains = 0
+    else:
+        tau = 0.0
+        for _ in range(50):
+            t_end = big_t - tau
+            z1 = min(zem0_m, a_off_mps2 * t_end**2 / n_of(t_end))
+            dv1 = (zem0_m - z1) / (big_t - 0.5 * tau)
+            tau_new = dv1 / engine_accel_mps2
+            if abs(tau_new - tau) < 1e-9 * big_t:
+                break
+            tau = tau_new
+        trains = 1
+    dv, z, tgos = dv1, z1, []
+    tgo = math.sqrt(n_end * z1 / a_on_mps2)
+    tgo = min(tgo, t_end)
+    while tgo > coast_s and z > 0.0:
+        removed = z * (1.0 - 1.0 / rho)
+        dv += removed / tgo
+        z -= removed
+        tgos.append(tgo)
+        tgo /= math.sqrt(rho)
+    chatter = n_end * impulse_bit_mps / (2.0 * a_off_mps2)
+    return PulseTrainEstimate(dv, dv1, trains + len(tgos), tuple(tgos), z, chatter)

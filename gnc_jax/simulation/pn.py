@@ -398,4 +398,48 @@ def build(scenario) -> tuple[PNSimulation, AugmentedPNGuidance]:
     return sim, law
 
 
-__all__ = ["PNErrors", "PNOutcome", "PNRecord", "PNSimulation", "build", "simulate"]
+def estimate_pulse_trains(scenario):
+    """Closed-form error-free Δv and pulse trains of a pn scenario.
+
+    See ``guidance.apn.pulse_train_estimate``.
+
+    Z0 and T come from the law's own view of the initial truth: Z0 = |A| T^2 / N with the
+    augmented command of eq. 11 (so the solar differential is included) and T = R / V_c.
+    """
+    from ..guidance.apn import (
+        PNNavigation,
+        augmented_pn_command,
+        closing_speed,
+        pulse_train_estimate,
+    )
+
+    sim, law = build(scenario)
+    cfg = scenario.config
+    y0 = sim.y0
+    a1, _ = augmented_pn_command(PNNavigation(y0.r, y0.v, y0.r_target), 1.0, sim.dynamics)
+    big_t = float(jnp.linalg.norm(y0.r) / closing_speed(-y0.r, -y0.v))
+    sc = cfg["spacecraft"]
+    bit = sc["thrust_n"] * sc["pulse_width_s"] / sc["mass_kg"]
+    return pulse_train_estimate(
+        zem0_m=float(jnp.linalg.norm(a1)) * big_t**2,
+        tgo0_s=big_t,
+        n0=float(law.n0),
+        k=float(law.k),
+        n_min=float(law.n_min),
+        a_on_mps2=float(law.a_on_mps2),
+        a_off_mps2=float(law.a_off_mps2),
+        coast_s=float(cfg["guidance"]["coast_s"]),
+        engine_accel_mps2=bit / cfg["guidance"]["dt_s"],
+        impulse_bit_mps=bit,
+    )
+
+
+__all__ = [
+    "PNErrors",
+    "PNOutcome",
+    "PNRecord",
+    "PNSimulation",
+    "build",
+    "estimate_pulse_trains",
+    "simulate",
+]

@@ -18,6 +18,7 @@ from gnc_jax.guidance.apn import (
     los_angle,
     los_angle_rate,
     navigation_coefficient,
+    pulse_train_estimate,
     schmitt_trigger,
 )
 
@@ -204,3 +205,56 @@ def test_law_gradient_wrt_gains_matches_finite_differences():
         fd = (throttle(gains + e) - throttle(gains - e)) / (2 * step)
         assert g[i] == pytest.approx(float(fd), rel=1e-5, abs=1e-9 * abs(g).max())
     assert np.all(g != 0.0)
+
+
+def _brute_force_pulse_trains(z0, big_t, n0, k, n_min, a_on, a_off, coast, accel, dt):
+    """The estimate's model stepped by brute force: straight line, trigger on A = N Z / t_go^2."""
+    z, dv, on, trains, t = z0, 0.0, False, 0, 0.0
+    while big_t - t > coast:
+        tgo = big_t - t
+        a = max(n_min, n0 * (tgo / big_t) ** k) * z / tgo**2
+        was_on = on
+        on = a >= a_on or (on and a > a_off)
+        trains += on and not was_on
+        if on:
+            dv += accel * dt
+            z -= accel * dt * (tgo - 0.5 * dt)  # exact for constant acceleration over the step
+        t += dt
+    return dv, trains, z
+
+
+@pytest.mark.parametrize(
+    "n0, k, rho",
+    [(8.0, 2.0, 2.0), (3.0, 0.0, 2.0), (8.0, 2.0, 4.0), (3.0, 0.0, 4.0), (8.0, 3.0, 2.0)],
+)
+def test_pulse_train_estimate_matches_a_brute_force_dead_band_simulation(n0, k, rho):
+    # A scaled seed 004 geometry: 1000 s, 2 km miss (impulsive minimum 2 m/s), 10 s coast,
+    # an engine that takes ~4 % of the flight for the first train.
+    big_t, z0, coast, accel, a_off = 1000.0, 2000.0, 10.0, 0.05, 2e-4
+    kw = dict(n0=n0, k=k, n_min=2.0, a_on_mps2=rho * a_off, a_off_mps2=a_off, coast_s=coast)
+    est = pulse_train_estimate(z0, big_t, engine_accel_mps2=accel, **kw)
+    dv, trains, z = _brute_force_pulse_trains(
+        z0,
+        big_t,
+        accel=accel,
+        dt=1e-3,
+        **{"n0": n0, "k": k, "n_min": 2.0, "a_on": rho * a_off, "a_off": a_off, "coast": coast},
+    )
+    assert est.dv_mps == pytest.approx(dv, rel=5e-4)
+    assert est.trains == trains
+    # the steps overshoot a_off by up to accel dt t_go of miss: the residual only roughly
+    assert est.residual_zem_m == pytest.approx(z, rel=0.25)
+    # the uncut impulsive form of the docstring
+    n_e = n0 if k == 0 else 2.0
+    uncut = pulse_train_estimate(
+        z0, big_t, coast_s=1e-9 * big_t, **{key: v for key, v in kw.items() if key != "coast_s"}
+    )
+    closed = z0 / big_t + a_off * big_t * ((1 + np.sqrt(rho)) / np.sqrt(n0 * n_e) - 1 / n0)
+    assert uncut.dv_mps == pytest.approx(closed, rel=1e-6)
+
+
+def test_pulse_train_estimate_rejects_what_it_does_not_model():
+    with pytest.raises(ValueError, match="k = 1"):
+        pulse_train_estimate(1.0, 1.0, 8.0, 1.0, 2.0, 2.0, 1.0, 0.1)
+    with pytest.raises(ValueError, match="a_off <= a_on"):
+        pulse_train_estimate(1.0, 1.0, 8.0, 2.0, 2.0, 1.0, 2.0, 0.1)
