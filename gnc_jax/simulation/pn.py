@@ -30,7 +30,14 @@ from .._status import Status, all_finite
 from .._types import Array, Float, Matrix3, PRNGKeyArray, Scalar, Vector3
 from ..dynamics.impactor import Engine, perturb_direction
 from ..dynamics.intercept import InterceptDynamics, InterceptState, coast_to_b_plane, propagate
-from ..guidance.apn import AugmentedPNGuidance, PNGuidanceContext, PNNavigation
+from ..guidance.apn import (
+    AugmentedPNGuidance,
+    PNGuidanceContext,
+    PNNavigation,
+    augmented_pn_command,
+    closing_speed,
+    pulse_train_estimate,
+)
 from ..navigation.camera import camera_attitude, los_angles
 from ..navigation.ekf import NavEstimate, propagate_covariance, propagate_state, update_los
 from .impactor import _normal, _safe_norm  # the same draws and |Δv| as the seed 000 loop
@@ -406,13 +413,6 @@ def estimate_pulse_trains(scenario):
     Z0 and T come from the law's own view of the initial truth: Z0 = |A| T^2 / N with the
     augmented command of eq. 11 (so the solar differential is included) and T = R / V_c.
     """
-    from ..guidance.apn import (
-        PNNavigation,
-        augmented_pn_command,
-        closing_speed,
-        pulse_train_estimate,
-    )
-
     sim, law = build(scenario)
     cfg = scenario.config
     y0 = sim.y0
