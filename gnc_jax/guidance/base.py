@@ -1,19 +1,27 @@
-"""Interface of the impactor terminal-guidance laws.
+"""The guidance-law family: one abstract interface, one registry per system's law family.
 
-A law is an ``equinox.Module`` whose tunable gains are array leaves; its evolving state is a
-small NamedTuple. The simulator calls
+A law is an ``equinox.Module`` whose tunable gains are array leaves (declared with
+:func:`gnc_jax.params.param`, so the scenario's ``[guidance.<law>]`` section is derived from
+them); its evolving state is a small NamedTuple. The simulator calls
 
 * ``init(nav, ctx) -> state`` once,
-* ``plan(state, nav, t, ctx) -> state`` at the image (navigation-update) rate, right after the
-  filter has taken the image at time ``t``;
-* ``step(state, nav, t, ctx) -> (EngineCommand, state)`` at the control rate.
+* ``plan(state, nav, t, ctx) -> state`` at the navigation-update rate (e.g. right after the
+  filter has taken an image at time ``t``); the default keeps the state;
+* ``step(state, nav, t, ctx) -> (command, state)`` at the control rate.
 
-``nav`` is the filter's :class:`~gnc_jax.navigation.ekf.NavEstimate`; ``ctx`` the mission data a
-law may use (:class:`ImpactorGuidanceContext`). Everything is written for one trajectory.
+``nav`` is what navigation hands the law, ``ctx`` the mission data known on board; both are
+the system's own types. Everything is written for one trajectory.
+
+Every system with guidance has a *family base*: an abstract subclass of
+:class:`AbstractGuidanceLaw` that declares ``laws = {}``. A law joins its family by
+:func:`register_law`; the system's scenario chooses one by ``guidance.law``::
+
+    @register_law("pn")
+    class ProportionalNavigation(AbstractImpactorGuidance): ...
 """
 
 import abc
-from typing import NamedTuple
+from typing import ClassVar, NamedTuple
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -21,6 +29,7 @@ import jax.numpy as jnp
 from .._types import Array, Float, Matrix3, Scalar, Vector3
 from ..dynamics.impactor import Engine, RelativeDynamics
 from ..geometry.bplane import b_plane_point_to_inertial
+from ..params import from_config
 
 
 class EngineCommand(NamedTuple):
@@ -69,14 +78,59 @@ def safe_unit(v: Vector3, fallback: Vector3) -> Vector3:
     return jnp.where(ok, v / n, fallback)
 
 
-class AbstractImpactorGuidance(eqx.Module):
-    """Base class of impactor guidance laws (see the module docstring for the protocol)."""
+class AbstractGuidanceLaw(eqx.Module):
+    """Base class of every guidance law (see the module docstring for the protocol).
+
+    Class attributes set by :func:`register_law`: ``law_name``, the name a scenario chooses it
+    by (``guidance.law``).
+    """
+
+    law_name: ClassVar[str] = ""
 
     @abc.abstractmethod
-    def init(self, nav, ctx: ImpactorGuidanceContext): ...
+    def init(self, nav, ctx): ...
 
-    def plan(self, state, nav, t, ctx: ImpactorGuidanceContext):
+    def plan(self, state, nav, t, ctx):
         return state
 
     @abc.abstractmethod
-    def step(self, state, nav, t, ctx: ImpactorGuidanceContext): ...
+    def step(self, state, nav, t, ctx): ...
+
+    @classmethod
+    def from_config(cls, section: dict, config: dict, ctx=None):
+        """The law of a validated scenario: ``section`` is its ``[guidance.<law>]`` table,
+        ``config`` the whole scenario (for laws whose SI values depend on other sections),
+        ``ctx`` the on-board context built by the system. Default: every declared field from
+        ``section`` (:func:`gnc_jax.params.from_config`)."""
+        return from_config(cls, section)
+
+
+def family_of(cls) -> type:
+    """The family base of a law class: the nearest base that declares ``laws``."""
+    for base in cls.__mro__:
+        if "laws" in vars(base):
+            return base
+    raise TypeError(f"{cls.__name__} is not in a guidance-law family (no base declares `laws`)")
+
+
+def register_law(name: str):
+    """Class decorator: register a law under ``name`` in its family (``guidance.law = name``)."""
+
+    def decorate(cls):
+        family = family_of(cls)
+        if name in family.laws and family.laws[name] is not cls:
+            raise ValueError(f"{family.__name__}: a law named {name!r} is already registered")
+        family.laws[name] = cls
+        cls.law_name = name
+        return cls
+
+    return decorate
+
+
+class AbstractImpactorGuidance(AbstractGuidanceLaw):
+    """Family base of the impactor terminal-guidance laws: ``nav`` is the filter's
+    :class:`~gnc_jax.navigation.ekf.NavEstimate`, ``ctx`` an :class:`ImpactorGuidanceContext`,
+    ``plan`` runs after each image's filter update, ``step`` returns an
+    :class:`EngineCommand`."""
+
+    laws: ClassVar[dict[str, type]] = {}
