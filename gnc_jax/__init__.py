@@ -15,17 +15,23 @@ Importing gnc_jax turns on float64 and splits the CPU into one XLA device per co
 
 from . import _config  # noqa: F401  (float64, host devices: must run before jax is used)
 from ._status import Status
-from .montecarlo import Study, run_key, run_study, simulate_one
+from .montecarlo import Study, build, run_key, run_study, simulate_one
 from .report import report
 from .reproduction import reproduce
 from .results import load_results
 from .scenario import Scenario, ScenarioError, list_scenarios, load_scenario
+from .systems import AbstractSystem, get_system, register_system, systems
 
 __version__ = "0.1.0"
 
 __all__ = [
     "Status",
     "Study",
+    "build",
+    "AbstractSystem",
+    "get_system",
+    "register_system",
+    "systems",
     "run_key",
     "run_study",
     "simulate_one",

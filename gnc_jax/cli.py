@@ -64,12 +64,12 @@ def _print_summary(summary: dict) -> None:
 
 def cmd_list(args) -> int:
     from .scenario import list_scenarios
-    from .scenario.loader import KINDS
+    from .systems import systems
 
     if args.fields:
-        for kind, module in KINDS.items():
-            print(f"[{kind}]")
-            for section, fields in module.SCHEMA.items():
+        for kind, system in systems().items():
+            print(f"[{kind}]  {system.description}")
+            for section, fields in system.schema().items():
                 for name, f in fields.items():
                     print(
                         f"  {section}.{name} = {f.default!r}   # {f.allowed()}"

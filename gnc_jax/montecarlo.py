@@ -11,7 +11,6 @@ import dataclasses
 import functools
 import sys
 import time
-from collections.abc import Callable
 from typing import Any
 
 import jax
@@ -21,23 +20,13 @@ from jax.sharding import Mesh, PartitionSpec
 
 from ._status import Status
 from .scenario import Scenario, ScenarioError
-from .simulation import capsule, impactor, midcourse, pn
+from .systems.base import AbstractSystem, get_system
 
 
-@dataclasses.dataclass(frozen=True)
-class System:
-    """How a scenario kind is built and simulated."""
-
-    build: Callable  # scenario -> (sim, law)
-    simulate: Callable  # (sim, law, key, record=False) -> (outcome NamedTuple, trace)
-
-
-SYSTEMS: dict[str, System] = {
-    "impactor": System(impactor.build, impactor.simulate),
-    "capsule": System(capsule.build, capsule.simulate),
-    "midcourse": System(midcourse.build, midcourse.simulate),
-}
-SYSTEMS["pn"] = System(pn.build, pn.simulate)
+def build(scenario: Scenario):
+    """``(params, law)`` of a scenario, built by its system (SI units): what
+    :func:`simulate_one` and :func:`run_study` run, for your own loops."""
+    return get_system(scenario.kind).build(scenario)
 
 
 def run_key(seed: int, index):
@@ -45,7 +34,7 @@ def run_key(seed: int, index):
     return jax.random.fold_in(jax.random.key(jnp.asarray(seed, dtype=jnp.uint32)), index)
 
 
-def batch_function(system: System, n_devices: int | None = None):
+def batch_function(system: AbstractSystem, n_devices: int | None = None):
     """``f(sim, law, seed, indices) -> outcomes`` vmapped over run indices, sharded over devices.
 
     ``indices`` must have a length divisible by the number of devices.
@@ -168,8 +157,8 @@ def run_study(
         raise ScenarioError(f"seed: {seed!r}; allowed: an integer in [0, 2^32)")
     if chunk_size is not None and (not isinstance(chunk_size, int) or chunk_size <= 0):
         raise ScenarioError(f"chunk_size: {chunk_size!r}; allowed: an integer >= 1")
-    system = SYSTEMS[scenario.kind]
-    sim, law = system.build(scenario)
+    system = get_system(scenario.kind)
+    sim, law = build(scenario)
     fn, n_dev = batch_function(system, n_devices)
     chunk = min(runs, chunk_size or 1024)
     chunk = -(-chunk // n_dev) * n_dev  # whole number of runs per device
@@ -202,14 +191,14 @@ def run_study(
 
 
 @functools.lru_cache(maxsize=16)
-def _jitted_single(system: System):
+def _jitted_single(system: AbstractSystem):
     return jax.jit(system.simulate, static_argnames=("record",))
 
 
 def simulate_one(scenario: Scenario, index: int = 0, seed: int | None = None, record=True):
     """Run ``index`` of a study alone (same key as in the batch), with its trace."""
-    system = SYSTEMS[scenario.kind]
-    sim, law = system.build(scenario)
+    system = get_system(scenario.kind)
+    sim, law = build(scenario)
     seed = scenario.seed if seed is None else seed
     out, trace = _jitted_single(system)(sim, law, run_key(seed, index), record=record)
     return jax.tree_util.tree_map(np.asarray, out), jax.tree_util.tree_map(np.asarray, trace)
@@ -223,8 +212,8 @@ def simulate_traces(
     Returns ``(outcomes, traces)`` as dicts of numpy arrays with the run on the first axis;
     the traces keep every ``every``-th sample along time to bound memory.
     """
-    system = SYSTEMS[scenario.kind]
-    sim, law = system.build(scenario)
+    system = get_system(scenario.kind)
+    sim, law = build(scenario)
     seed = scenario.seed if seed is None else seed
     fn = _batched_traces(system, every)
     indices = np.asarray(indices, dtype=int)
@@ -240,7 +229,7 @@ def simulate_traces(
 
 
 @functools.lru_cache(maxsize=16)
-def _batched_traces(system: System, every: int):
+def _batched_traces(system: AbstractSystem, every: int):
     def run(sim, law, seed, i):
         out, trace = system.simulate(sim, law, run_key(seed, i), record=True)
         return out, jax.tree_util.tree_map(lambda x: x[::every], trace)

@@ -38,6 +38,7 @@ class ParamSpec:
     field: Field  # the scenario-file declaration (file units)
     toml: str  # file name of the field ("" = the attribute's name)
     scale: float  # SI = file value x scale
+    derived: bool = False  # SI value depends on other fields: the owner's from_config converts
 
     def to_si(self, value):
         kind = self.field.kind
@@ -78,6 +79,7 @@ def param(
     length: int | None = None,
     min_length: int = 0,
     kind: str | None = None,
+    si_default=None,
 ):
     """A Module field declared with its scenario field (see the module docstring).
 
@@ -91,6 +93,8 @@ def param(
         choices: allowed strings; length, min_length: of a list of numbers.
         kind: "float", "int", "bool", "str" or "floats" (default: from ``default``). Ints and
             strings are static fields (they decide shapes or branches); bools become 0/1 floats.
+        si_default: the Module's SI default when the conversion is not a constant factor
+            (it depends on other scenario fields; the owner converts in its ``from_config``).
     """
     kind = kind or _kind_of(default)
     if kind == "float":
@@ -99,10 +103,11 @@ def param(
         Field(kind, default, lo, hi, lo_open, length, min_length, choices, units, doc),
         toml,
         scale,
+        si_default is not None,
     )
     meta = {_KEY: spec}
     static = kind in ("int", "str")
-    si = spec.to_si(default)
+    si = spec.to_si(default) if si_default is None else jnp.asarray(si_default, jnp.float64)
     if kind == "floats":
         return eqx.field(default_factory=lambda: spec.to_si(default), metadata=meta)
     if static:
@@ -112,9 +117,7 @@ def param(
 
 def declared_params(cls) -> dict[str, ParamSpec]:
     """``{attribute name: ParamSpec}`` of the fields of ``cls`` declared with :func:`param`."""
-    return {
-        f.name: f.metadata[_KEY] for f in dataclasses.fields(cls) if _KEY in (f.metadata or {})
-    }
+    return {f.name: f.metadata[_KEY] for f in dataclasses.fields(cls) if _KEY in (f.metadata or {})}
 
 
 def file_name(attribute: str, spec: ParamSpec) -> str:

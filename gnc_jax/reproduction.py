@@ -4,57 +4,21 @@ import json
 import pathlib
 
 from .montecarlo import run_study
-from .scenario import list_scenarios
-
-#: how each summary metric is printed
-LABELS = {
-    "miss_rms_m": "miss RMS (m)",
-    "miss_max_m": "miss max (m)",
-    "dv_mean_mps": "Δv mean (m/s)",
-    "dv_max_mps": "Δv max (m/s)",
-    "firings_max": "firings max",
-    "firings_mode": "firings mode",
-    "downrange_err_km_3sigma": "downrange 3σ (km)",
-    "crossrange_err_km_3sigma": "crossrange 3σ (km)",
-    "downrange_err_km_central_99_73": "downrange central 99.73 % (km)",
-    "crossrange_err_km_central_99_73": "crossrange central 99.73 % (km)",
-    "downrange_err_km_outside_2p5_km": "runs with |downrange| > 2.5 km",
-    "crossrange_err_km_outside_2p5_km": "runs with |crossrange| > 2.5 km",
-    "switch_speed_mps_mean": "switch V mean (m/s)",
-    "switch_altitude_km_mean": "switch H mean (km)",
-    "switch_hdot_mps_mean": "switch Ḣ mean (m/s)",
-    "switch_range_km_mean": "switch range mean (km)",
-    "predictions_mean": "predictions/traj mean",
-    "predictions_max": "predictions/traj max",
-    "cycle_predictions_max_mean": "max per cycle, mean",
-    "cycle_predictions_max": "max per cycle, max",
-    "b_err_km_rms": "|ΔB| RMS (km)",
-    "b_err_km_max": "|ΔB| max (km)",
-    "tof_err_s_rms": "|Δt_TOF| RMS (s)",
-    "tof_err_s_max": "|Δt_TOF| max (s)",
-    "goal_met_pct": "goal met (% runs)",
-    "corrections_mean": "corrections mean",
-    "dv_increase_pct_mean": "Δv increase (%)",
-    "dv_first_mean_mps": "first Δv (m/s)",
-    "later_dv_below_0p2_pct": "later Δv < 0.2 m/s (%)",
-    "correction_every_fix_pct": "burn every fix (% runs)",
-    "iterations_mean": "Newton iterations mean",
-    "b0_err_km_rms": "|ΔB| no guidance RMS (km)",
-    "b0_err_r_km_std": "ΔB_R no guidance 1σ (km)",
-    "b0_err_t_km_std": "ΔB_T no guidance 1σ (km)",
-    "miss_mean_m": "miss mean (m)",
-    "los_error_rms_urad_mean": "LOS meas. error RMS (µrad)",
-}
-LABELS.update({"firings_mean": "firings (mean)", "miss_mean_m": "miss mean (m)"})
+from .scenario import ScenarioError, list_scenarios
+from .systems.base import get_system
 
 
 def comparison_rows(summary: dict) -> list[tuple[str, str, str]]:
     """``(metric, paper, gnc_jax)`` rows for every published metric of a summary."""
     rows = []
+    try:
+        labels = get_system(summary.get("kind", "")).paper_labels
+    except ScenarioError:
+        labels = {}
     for key, paper in summary.get("paper", {}).items():
         ours = summary.get(key)
         fmt = lambda v: f"{v:.4g}" if isinstance(v, float) else str(v)
-        rows.append((LABELS.get(key, key), fmt(paper), "—" if ours is None else fmt(ours)))
+        rows.append((labels.get(key, key), fmt(paper), "—" if ours is None else fmt(ours)))
     return rows
 
 

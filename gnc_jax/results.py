@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from ._status import Status
+from .systems.base import get_system
 
 
 def _machine_note(study) -> str:
@@ -23,161 +24,6 @@ def _machine_note(study) -> str:
         f"jax {jax.__version__}, {platform.python_implementation()} "
         f"{platform.python_version()}"
     )
-
-
-def _impactor_stats(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
-    miss = o["miss_m"][ok]
-    dv = o["dv_mps"][ok]
-    firings = o["firings"][ok]
-    if miss.size == 0:
-        return {}
-    counts = np.bincount(firings)
-    return dict(
-        miss_rms_m=float(np.sqrt(np.mean(miss**2))),
-        miss_mean_m=float(np.mean(miss)),
-        miss_max_m=float(np.max(miss)),
-        miss_p99_m=float(np.percentile(miss, 99)),
-        miss_t_mean_m=float(np.mean(o["miss_t_m"][ok])),
-        miss_r_mean_m=float(np.mean(o["miss_r_m"][ok])),
-        dv_mean_mps=float(np.mean(dv)),
-        dv_std_mps=float(np.std(dv)),
-        dv_max_mps=float(np.max(dv)),
-        firings_mean=float(np.mean(firings)),
-        firings_max=int(np.max(firings)),
-        firings_mode=int(np.argmax(counts)),
-        firings_histogram={int(k): int(v) for k, v in enumerate(counts) if v},
-        fuel_mean_kg=float(np.mean(o["fuel_kg"][ok])),
-    )
-
-
-def _impactor_kind_stats(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
-    """The impactor statistics plus those of the seed 000/002 navigation front ends."""
-    out = _impactor_stats(o, ok)
-    if out:
-        out.update(
-            los_error_rms_urad_mean=float(np.mean(o["los_error_rms_urad"][ok])),
-            images_rejected_max=int(np.max(o["images_rejected"][ok])),
-            images_rejected_mean=float(np.mean(o["images_rejected"][ok])),
-        )
-    return out
-
-
-def _interval(x: np.ndarray) -> dict[str, Any]:
-    m, s = float(np.mean(x)), float(np.std(x))
-    return dict(
-        mean=m,
-        std=s,
-        min=float(np.min(x)),
-        max=float(np.max(x)),
-        three_sigma=[m - 3 * s, m + 3 * s],
-    )
-
-
-def _capsule_stats(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
-    if not ok.any():
-        return {}
-    out: dict[str, Any] = {
-        "downrange_err_km": _interval(o["downrange_err_km"][ok]),
-        "crossrange_err_km": _interval(o["crossrange_err_km"][ok]),
-        "downrange_err_km_3sigma": "{:.2f} .. {:.2f}".format(
-            *_interval(o["downrange_err_km"][ok])["three_sigma"]
-        ),
-        "crossrange_err_km_3sigma": "{:.2f} .. {:.2f}".format(
-            *_interval(o["crossrange_err_km"][ok])["three_sigma"]
-        ),
-        # the empirical interval holding 99.73 % of the runs (what mean +- 3 std means for a
-        # Gaussian), which a few heavy-tailed runs do not stretch
-        **{
-            f"{name}_central_99_73": "{:.2f} .. {:.2f}".format(
-                *np.percentile(o[name][ok], [0.135, 99.865])
-            )
-            for name in ("downrange_err_km", "crossrange_err_km")
-        },
-        **{
-            f"{name}_outside_2p5_km": int(np.sum(np.abs(o[name][ok]) > 2.5))
-            for name in ("downrange_err_km", "crossrange_err_km")
-        },
-        "load_peak_g_max": float(np.max(o["load_peak_g"][ok])),
-        "load_peak_g_mean": float(np.mean(o["load_peak_g"][ok])),
-        "heat_rate_peak_kw_m2_max": float(np.max(o["heat_rate_peak_kw_m2"][ok])),
-        "heat_load_mj_m2_max": float(np.max(o["heat_load_mj_m2"][ok])),
-        "skip_apogee_km_mean": float(np.mean(o["skip_apogee_km"][ok])),
-        "predictions_mean": float(np.mean(o["predictions"][ok])),
-        "predictions_max": int(np.max(o["predictions"][ok])),
-        "cycle_predictions_max_mean": float(np.mean(o["cycle_predictions_max"][ok])),
-        "cycle_predictions_max": int(np.max(o["cycle_predictions_max"][ok])),
-        "pc_cycles_mean": float(np.mean(o["pc_cycles"][ok])),
-        "corrector_failures_total": int(np.sum(o["corrector_failures"][ok])),
-        "reversals_mean": float(np.mean(o["reversals"][ok])),
-    }
-    for name in ("switch_speed_mps", "switch_altitude_km", "switch_hdot_mps", "switch_range_km"):
-        out[f"{name}_mean"] = float(np.mean(o[name][ok]))
-        out[f"{name}_3sigma"] = _interval(o[name][ok])["three_sigma"]
-    return out
-
-
-def _midcourse_stats(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
-    if not ok.any():
-        return {}
-    rms = lambda x: float(np.sqrt(np.mean(x**2)))
-    b, tof = o["b_err_m"][ok] / 1e3, np.abs(o["tof_err_s"][ok])
-    b0, tof0 = o["b0_err_m"][ok] / 1e3, np.abs(o["tof0_err_s"][ok])
-    dv, count = o["dv_mps"][ok], o["corrections"][ok]
-    per_fix = o["dv_per_fix_mps"][ok]
-    later = per_fix[:, 1:][per_fix[:, 1:] > 0.0]
-    return dict(
-        b_err_km_rms=rms(b),
-        b_err_km_max=float(np.max(b)),
-        tof_err_s_rms=rms(tof),
-        tof_err_s_max=float(np.max(tof)),
-        dv_mean_mps=float(np.mean(dv)),
-        corrections_mean=float(np.mean(count)),
-        goal_met=int(np.sum(o["goal_met"][ok])),
-        goal_met_pct=float(100.0 * np.mean(o["goal_met"][ok])),
-        b_err_r_km_std=float(np.std(o["b_err_r_m"][ok] / 1e3)),
-        b_err_t_km_std=float(np.std(o["b_err_t_m"][ok] / 1e3)),
-        tof_err_s_std=float(np.std(o["tof_err_s"][ok])),
-        b0_err_km_rms=rms(b0),
-        b0_err_km_max=float(np.max(b0)),
-        b0_err_r_km_std=float(np.std(o["b0_err_r_m"][ok] / 1e3)),
-        b0_err_t_km_std=float(np.std(o["b0_err_t_m"][ok] / 1e3)),
-        tof0_err_s_rms=rms(tof0),
-        dv_max_mps=float(np.max(dv)),
-        dv_first_mean_mps=float(np.mean(o["dv_first_mps"][ok])),
-        dv_ref_mean_mps=float(np.mean(o["dv_ref_mps"][ok])),
-        dv_increase_pct_mean=float(np.mean(o["dv_increase_pct"][ok])),
-        later_dv_max_mps=float(np.max(later)) if later.size else 0.0,
-        later_dv_below_0p2_pct=float(100.0 * np.mean(later < 0.2)) if later.size else 0.0,
-        corrections_max=int(np.max(count)),
-        correction_every_fix_pct=float(100.0 * np.mean(count == per_fix.shape[1])),
-        iterations_mean=float(np.mean(o["iterations"][ok][count > 0])) if np.any(count) else 0.0,
-        ground_calls_total=int(np.sum(o["ground_calls"][ok])),
-    )
-
-
-STATS = {"impactor": _impactor_kind_stats, "capsule": _capsule_stats, "midcourse": _midcourse_stats}
-
-
-def _pn_stats(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
-    """Seed 004: miss (B-plane), total Δv, firings (pulse trains), as the impactor plus extras."""
-    if not ok.any():
-        return {}
-    out = _impactor_stats(o, ok)
-    miss = o["miss_m"][ok]
-    out.update(
-        miss_std_m=float(np.std(miss)),
-        miss_t_std_m=float(np.std(o["miss_t_m"][ok])),
-        miss_r_std_m=float(np.std(o["miss_r_m"][ok])),
-        dv_min_mps=float(np.min(o["dv_mps"][ok])),
-        ignitions_mean=float(np.mean(o["ignitions"][ok])),
-        pulses_mean=float(np.mean(o["pulses"][ok])),
-        last_firing_s_mean=float(np.mean(o["last_firing_s"][ok])),
-        nav_position_error_m_rms=float(np.sqrt(np.mean(o["nav_position_error_m"][ok] ** 2))),
-    )
-    return out
-
-
-STATS["pn"] = _pn_stats
 
 
 def summarize(study) -> dict[str, Any]:
@@ -200,9 +46,10 @@ def summarize(study) -> dict[str, Any]:
         chunk_size=study.chunk_size,
         machine=_machine_note(study),
     )
-    if sc.kind == "impactor":
+    system = get_system(sc.kind)
+    if system.laws():
         out["law"] = sc.config["guidance"]["law"]
-    out.update(STATS[sc.kind](study.outcomes, ok))
+    out.update(system.statistics(study.outcomes, ok))
     out["paper"] = dict(sc.paper)
     return out
 

@@ -16,18 +16,23 @@ SHORT = [
     "errors.delivery_position_km=1.0",
     "navigation.knowledge_position_km=[20.0, 1.0, 1.0]",
     "guidance.retarget_tgo_s=300.0",
-    "guidance.burn_times_s=[150.0, 600.0, 700.0, 900.0]",
+    "guidance.predictive.burn_times_s=[150.0, 600.0, 700.0, 900.0]",
 ]
 
 BAD_INPUT = [
     (["run", "no-such-scenario"], "scenario: unknown scenario 'no-such-scenario'"),
     (["run", "deep-impact-los", "--set", "guidance.kk1=3"], "guidance.kk1: unknown field"),
     (["run", "deep-impact-los", "--set", "warp.speed=3"], "warp: unknown section"),
-    (["run", "deep-impact-los", "--set", 'guidance.k1="four"'], "guidance.k1: expected a number"),
+    (
+        ["run", "deep-impact-los", "--set", 'guidance.los.k1="four"'],
+        "guidance.los.k1: expected a number",
+    ),
+    (["run", "deep-impact-los", "--set", "guidance.k1=3"], "it moved to [guidance.los]"),
+    (["run", "deep-impact-los", "--set", "guidance.los.kk=3"], "guidance.los.kk: unknown field"),
     (["run", "deep-impact-los", "--set", "guidance.law=pn"], "guidance.law: got 'pn'"),
     (["run", "deep-impact-los", "--set", "spacecraft.mass_kg=-372"], "spacecraft.mass_kg: -372"),
     (["run", "deep-impact-los", "--set", "spacecraft.thrust_n=0"], "spacecraft.thrust_n: 0"),
-    (["run", "deep-impact-los", "--set", "guidance.k2=5"], "guidance.k2: 5 > k1 = 4"),
+    (["run", "deep-impact-los", "--set", "guidance.los.k2=5"], "guidance.los.k2: 5 > k1 = 4"),
     (["run", "deep-impact-los", "--set", "guidance.dt_s=7"], "guidance.dt_s: 7 s does not divide"),
     (
         ["run", "deep-impact-los", "--set", "approach.reference_normal=[1.0,0.0,0.0]"],
@@ -50,9 +55,13 @@ BAD_INPUT = [
 ]
 APN = "bennu-apn"
 BAD_INPUT += [
-    (["run", APN, "--set", "guidance.trigger_off=2"], "guidance.trigger_off: 2 >= trigger_on"),
-    (["run", APN, "--set", "guidance.n0=-1"], "guidance.n0: -1"),
-    (["run", APN, "--set", "guidance.k=11"], "guidance.k: 11"),
+    (
+        ["run", APN, "--set", "guidance.apn.trigger_off=2"],
+        "guidance.apn.trigger_off: 2 >= trigger_on",
+    ),
+    (["run", APN, "--set", "guidance.apn.n0=-1"], "guidance.apn.n0: -1"),
+    (["run", APN, "--set", "guidance.apn.k=11"], "guidance.apn.k: 11"),
+    (["run", APN, "--set", "guidance.n0=3"], "it moved to [guidance.apn]"),
     (["run", APN, "--set", "spacecraft.pulse_width_s=2"], "spacecraft.pulse_width_s: 2 > guid"),
     (["run", APN, "--set", "navigation.model=kalman"], "navigation.model: got 'kalman'"),
     (["run", APN, "--set", "approach.geometry=spherical"], "approach.geometry: got"),
@@ -109,23 +118,30 @@ def test_api_errors_name_the_field():
         gj.run_study(sc, runs=0)
     with pytest.raises(ScenarioError, match=r"^seed: -1"):
         gj.run_study(sc, runs=1, seed=-1)
-    with pytest.raises(ScenarioError, match=r"guidance.burn_times_s"):
-        sc.with_overrides({"guidance.burn_times_s": [1200.0, 1205.0]})
+    with pytest.raises(ScenarioError, match=r"guidance.predictive.burn_times_s"):
+        sc.with_overrides(
+            {"guidance.law": "predictive", "guidance.predictive.burn_times_s": [1200.0, 1205.0]}
+        )
+    # the LOS law has no burn times: a schedule it does not fly is not checked against it
+    sc.with_overrides({"camera.image_interval_s": 30.0, "guidance.dt_s": 1.0})
 
 
 def test_user_toml_and_resolved_round_trip(tmp_path):
-    sc = gj.load_scenario("deep-impact-predictive", overrides=["guidance.tolerance_m=0.5"])
+    sc = gj.load_scenario(
+        "deep-impact-predictive", overrides=["guidance.predictive.tolerance_m=0.5"]
+    )
     path = tmp_path / "mine.toml"
     path.write_text(sc.to_toml())
     again = gj.load_scenario(path)
     assert again.config == sc.config
     assert again.paper == sc.paper and again.runs == sc.runs
-    assert again["guidance.tolerance_m"] == 0.5
+    assert again["guidance.predictive.tolerance_m"] == 0.5
     # defaults fill fields a user file leaves out
     small = tmp_path / "small.toml"
-    small.write_text('[scenario]\nname = "x"\nkind = "impactor"\n[guidance]\nk1 = 3.0\n')
+    small.write_text('[scenario]\nname = "x"\nkind = "impactor"\n[guidance.los]\nk1 = 3.0\n')
     s2 = gj.load_scenario(small)
-    assert s2["guidance.k1"] == 3.0 and s2["spacecraft.thrust_n"] == 88.0
+    assert s2["guidance.los.k1"] == 3.0 and s2["spacecraft.thrust_n"] == 88.0
+    assert s2["guidance.law"] == "los" and "predictive" not in s2.config["guidance"]
 
 
 def test_list(capsys):
@@ -133,7 +149,7 @@ def test_list(capsys):
     out = capsys.readouterr().out
     assert "deep-impact-los" in out and "deep-impact-predictive" in out
     assert cli.main(["list", "--fields"]) == 0
-    assert "guidance.k1 = 4.0" in capsys.readouterr().out
+    assert "guidance.los.k1 = 4.0" in capsys.readouterr().out
 
 
 def test_run_writes_results_and_report(tmp_path, capsys):
@@ -227,9 +243,7 @@ def test_pn_run_writes_results_and_report(tmp_path, capsys):
 
 @pytest.mark.parametrize("name", [n for n in gj.scenario.packaged_names() if n.startswith("bennu")])
 def test_pn_scenarios_load_with_paper_rows(name):
-    from gnc_jax.reproduction import LABELS
-
     sc = gj.load_scenario(name)
-    assert sc.kind == "pn" and sc.paper
+    assert sc.kind == "intercept" and sc.paper
     for key in sc.paper:
-        assert key in LABELS, key
+        assert key in sc.system.paper_labels, key

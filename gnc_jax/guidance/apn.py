@@ -33,7 +33,9 @@ import jax.numpy as jnp
 from .._types import Scalar, Vector3
 from ..dynamics.intercept import InterceptDynamics
 from ..geometry.los import los_rate
-from .base import EngineCommand, safe_unit
+from ..params import from_config, param
+from ..scenario.schema import ScenarioError
+from .base import AbstractInterceptGuidance, EngineCommand, register_law, safe_unit
 
 
 class PNNavigation(NamedTuple):
@@ -120,26 +122,72 @@ class APNState(NamedTuple):
     coefficient: Scalar  # N of eq. 12
 
 
-class AugmentedPNGuidance(eqx.Module):
+@register_law("apn")
+class AugmentedPNGuidance(AbstractInterceptGuidance):
     """Seed 004 law. ``n0``, ``k``, ``a_on_mps2``, ``a_off_mps2`` are differentiable leaves.
 
-    Paper gains: N0 = 8, k = 2 (variable); constant N is k = 0 with N0 = N.
+    Paper gains: N0 = 8, k = 2 (variable); constant N is k = 0 with N0 = N. The scenario gives
+    the trigger thresholds in units of a_ref = n_min q / coast (``trigger_scale``: the command
+    change one pulse causes at the start of the coast); the defaults are the SI values for the
+    default engine.
     """
 
-    n0: Scalar = 8.0
-    k: Scalar = 2.0
-    a_on_mps2: Scalar = 4e-5
-    a_off_mps2: Scalar = 2e-5
-    n_min: Scalar = 2.0
-    temperature: Scalar = 0.05
+    n0: Scalar = param(8.0, lo=0.0, lo_open=True, hi=100.0, doc="N0 of eq. 12")
+    k: Scalar = param(2.0, lo=0.0, hi=10.0, doc="exponent k of eq. 12; 0 = constant N = n0")
+    a_on_mps2: Scalar = param(
+        1.0,
+        toml="trigger_on",
+        lo=0.0,
+        lo_open=True,
+        hi=1e6,
+        si_default=4e-5,
+        doc="Schmitt on-threshold a_on in units of a_ref = n_min x (minimum impulse bit) / "
+        "coast_s, the command change one pulse causes at the start of the coast",
+    )
+    a_off_mps2: Scalar = param(
+        0.5,
+        toml="trigger_off",
+        lo=0.0,
+        lo_open=True,
+        hi=1e6,
+        si_default=2e-5,
+        doc="Schmitt off-threshold a_off in units of a_ref; trigger_off < trigger_on",
+    )
+    n_min: Scalar = param(2.0, lo=0.0, hi=100.0, doc="lower bound of N (eq. 12: 2)")
+    temperature: Scalar = param(
+        0.05, lo=0.0, lo_open=True, hi=10.0, doc="relaxed trigger (gradients only)"
+    )
     relaxed: bool = eqx.field(static=True, default=False)
+
+    @classmethod
+    def check(cls, section, config):
+        if section["trigger_off"] >= section["trigger_on"]:
+            raise ScenarioError(
+                f"guidance.apn.trigger_off: {section['trigger_off']:g} >= trigger_on = "
+                f"{section['trigger_on']:g}; allowed: 0 < trigger_off < trigger_on"
+            )
+
+    @classmethod
+    def from_config(cls, section, config, ctx=None):
+        sc = config["spacecraft"]
+        scale = trigger_scale(
+            sc["thrust_n"],
+            sc["mass_kg"],
+            sc["pulse_width_s"],
+            section["n_min"],
+            config["guidance"]["coast_s"],
+        )
+        f = lambda x: jnp.asarray(x, dtype=jnp.float64)  # noqa: E731
+        return from_config(
+            cls,
+            section,
+            a_on_mps2=f(section["trigger_on"] * scale),
+            a_off_mps2=f(section["trigger_off"] * scale),
+        )
 
     def init(self, nav: PNNavigation, ctx: PNGuidanceContext) -> APNState:
         z = jnp.zeros(())
         return APNState(z, jnp.zeros(3), jnp.asarray(self.n0, float))
-
-    def plan(self, state, nav, t, ctx):
-        return state
 
     def step(self, state: APNState, nav: PNNavigation, t, ctx: PNGuidanceContext):
         """Engine command (throttle = fraction of the step at full thrust, unit direction)."""
@@ -156,6 +204,17 @@ class AugmentedPNGuidance(eqx.Module):
         fallback = jnp.cross(ctx.reference_normal, u)
         direction = safe_unit(a_cmd, fallback / jnp.linalg.norm(fallback))
         return EngineCommand(on * ctx.pulse_fraction, direction), APNState(on, a_cmd, n)
+
+
+def trigger_scale(thrust_n, mass_kg, pulse_width_s, n_min, coast_s):
+    """a_ref = n_min q / t_coast with q = F tau / m the minimum impulse bit, m/s^2.
+
+    One pulse perpendicular to the LOS at time-to-go t_go changes the PN command by
+    N q / t_go; a_ref is that change for the minimum gain at the start of the coast. A command
+    below it asks for less than one pulse can deliver cleanly at the last firing opportunity,
+    and its zero-effort miss a_ref t_coast^2 / n_min equals the miss one pulse moves there.
+    """
+    return n_min * thrust_n * pulse_width_s / mass_kg / coast_s
 
 
 class PulseTrainEstimate(NamedTuple):

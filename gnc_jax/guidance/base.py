@@ -21,6 +21,7 @@ Every system with guidance has a *family base*: an abstract subclass of
 """
 
 import abc
+import dataclasses
 from typing import ClassVar, NamedTuple
 
 import equinox as eqx
@@ -96,6 +97,21 @@ class AbstractGuidanceLaw(eqx.Module):
     @abc.abstractmethod
     def step(self, state, nav, t, ctx): ...
 
+    def relax(self, temperature=None):
+        """The law with its discontinuous logic replaced by its smooth relaxation (for
+        gradients; a static ``relaxed`` field), at ``temperature`` when given and the law has
+        one; the law itself when it has no relaxation."""
+        names = {f.name for f in dataclasses.fields(self)}
+        law = dataclasses.replace(self, relaxed=True) if "relaxed" in names else self
+        if temperature is not None and "temperature" in names:
+            law = eqx.tree_at(lambda x: x.temperature, law, jnp.asarray(temperature, float))
+        return law
+
+    @classmethod
+    def check(cls, section: dict, config: dict) -> None:
+        """Cross-field checks of the law's validated ``[guidance.<law>]`` table against the
+        whole scenario; raise :class:`~gnc_jax.scenario.ScenarioError` with one line."""
+
     @classmethod
     def from_config(cls, section: dict, config: dict, ctx=None):
         """The law of a validated scenario: ``section`` is its ``[guidance.<law>]`` table,
@@ -132,5 +148,14 @@ class AbstractImpactorGuidance(AbstractGuidanceLaw):
     :class:`~gnc_jax.navigation.ekf.NavEstimate`, ``ctx`` an :class:`ImpactorGuidanceContext`,
     ``plan`` runs after each image's filter update, ``step`` returns an
     :class:`EngineCommand`."""
+
+    laws: ClassVar[dict[str, type]] = {}
+
+
+class AbstractInterceptGuidance(AbstractGuidanceLaw):
+    """Family base of the deep-space intercept laws (seed 004): ``nav`` is a
+    :class:`~gnc_jax.guidance.apn.PNNavigation`, ``ctx`` a
+    :class:`~gnc_jax.guidance.apn.PNGuidanceContext`, ``step`` returns an
+    :class:`EngineCommand` whose throttle is the pulse fraction of the step."""
 
     laws: ClassVar[dict[str, type]] = {}

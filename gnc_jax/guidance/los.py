@@ -17,7 +17,15 @@ import jax.numpy as jnp
 from .._types import Scalar
 from ..geometry.ellipse import b_plane_position_covariance, mean_position_error
 from ..geometry.los import los_rate, range_rate, zero_effort_miss
-from .base import AbstractImpactorGuidance, EngineCommand, ImpactorGuidanceContext, safe_unit
+from ..params import param
+from ..scenario.schema import ScenarioError
+from .base import (
+    AbstractImpactorGuidance,
+    EngineCommand,
+    ImpactorGuidanceContext,
+    register_law,
+    safe_unit,
+)
 
 
 def switching_curve(rho, rho_dot_scalar, rho_limit):
@@ -39,6 +47,7 @@ class LOSGuidanceState(NamedTuple):
     omega_close: Scalar
 
 
+@register_law("los")
 class LOSSwitchingCurveGuidance(AbstractImpactorGuidance):
     """Seed 000 LOS law. Gains ``k1``, ``k2`` (paper: 4, 1) are differentiable leaves.
 
@@ -48,10 +57,24 @@ class LOSSwitchingCurveGuidance(AbstractImpactorGuidance):
     k1 and k2 exist; it reduces to the hard logic as T -> 0. Evaluation uses the hard logic.
     """
 
-    k1: Scalar = 4.0
-    k2: Scalar = 1.0
-    temperature: Scalar = 0.05
+    k1: Scalar = param(
+        4.0, lo=0.0, lo_open=True, hi=100.0, doc="miss tolerance rho_max = k1 sqrt(E^2+F^2)"
+    )
+    k2: Scalar = param(
+        1.0, lo=0.0, lo_open=True, hi=100.0, doc="shut-off rho_min = k2 sqrt(E^2+F^2); k2 <= k1"
+    )
+    temperature: Scalar = param(
+        0.05, lo=0.0, lo_open=True, hi=10.0, doc="temperature of the relaxed switch (gradients)"
+    )
     relaxed: bool = eqx.field(static=True, default=False)
+
+    @classmethod
+    def check(cls, section, config):
+        if section["k2"] > section["k1"]:
+            raise ScenarioError(
+                f"guidance.los.k2: {section['k2']:g} > k1 = {section['k1']:g}; "
+                "allowed: 0 < k2 <= k1"
+            )
 
     def init(self, nav, ctx: ImpactorGuidanceContext) -> LOSGuidanceState:
         z = jnp.zeros(())

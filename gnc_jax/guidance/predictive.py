@@ -11,13 +11,21 @@ the predictor models the burn at the engine's thrust, and the law commands it as
 
 from typing import NamedTuple
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 
 from .._types import Array, Float, Scalar, Vector3
 from ..dynamics.impactor import ImpactorState, coast_to_b_plane, propagate
-from .base import AbstractImpactorGuidance, EngineCommand, ImpactorGuidanceContext, safe_unit
+from ..params import param
+from ..scenario.impactor import time_of_flight_s
+from ..scenario.schema import ScenarioError
+from .base import (
+    AbstractImpactorGuidance,
+    EngineCommand,
+    ImpactorGuidanceContext,
+    register_law,
+    safe_unit,
+)
 
 
 class PredictiveGuidanceState(NamedTuple):
@@ -34,16 +42,42 @@ def _safe_norm(v):
     return jnp.sqrt(jnp.dot(v, v) + 1e-24)
 
 
+@register_law("predictive")
 class PredictiveGuidance(AbstractImpactorGuidance):
     """Scheduled predictive guidance. ``burn_times_s``: mission times of the burns (seed 002:
     1200, 4100, 6450, 6780 s), at most one per image interval."""
 
-    burn_times_s: Float[Array, " n"] = eqx.field(
-        default_factory=lambda: jnp.array([1200.0, 4100.0, 6450.0, 6780.0])
+    burn_times_s: Float[Array, " n"] = param(
+        [1200.0, 4100.0, 6450.0, 6780.0],
+        lo=0.0,
+        min_length=1,
+        units="s",
+        doc="mission times of the burns",
     )
-    tolerance_m: Scalar = 0.1
-    newton_iterations: int = eqx.field(static=True, default=4)
-    predictor_steps: int = eqx.field(static=True, default=4)
+    tolerance_m: Scalar = param(
+        0.1,
+        lo=0.0,
+        lo_open=True,
+        hi=1e6,
+        units="m",
+        doc="predicted-miss tolerance of the Newton iteration",
+    )
+    newton_iterations: int = param(4, lo=1, hi=50, doc="Newton iterations per burn")
+    predictor_steps: int = param(4, lo=1, hi=10000, doc="RK4 steps per predictor segment")
+
+    @classmethod
+    def check(cls, section, config):
+        cam, g = config["camera"], config["guidance"]
+        bt = section["burn_times_s"]
+        t_cut = time_of_flight_s(config) - g["cutoff_tgo_s"]
+        if any(b2 - b1 < cam["image_interval_s"] for b1, b2 in zip(bt, bt[1:])) or any(
+            b >= t_cut for b in bt
+        ):
+            raise ScenarioError(
+                f"guidance.predictive.burn_times_s: {bt}; allowed: increasing, at least one "
+                f"image interval ({cam['image_interval_s']:g} s) apart, each before the cut-off "
+                f"at {t_cut:g} s"
+            )
 
     def init(self, nav, ctx: ImpactorGuidanceContext) -> PredictiveGuidanceState:
         z = jnp.zeros(())

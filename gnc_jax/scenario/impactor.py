@@ -69,6 +69,9 @@ SCHEMA = {
             length=3,
             doc="direction from the target to the Sun (solar tide; image front-end lighting)",
         ),
+        "coast_steps": F(
+            "int", 4, lo=1, hi=10000, doc="RK4 steps of the final coast to the B-plane"
+        ),
     },
     "camera": {
         "focal_length_m": F("float", 2.103, lo=0.0, lo_open=True, hi=100.0, units="m"),
@@ -211,12 +214,6 @@ SCHEMA = {
         ),
     },
     "guidance": {
-        "law": F(
-            "str",
-            "los",
-            choices=("los", "predictive"),
-            doc="los: seed 000 switching curves; predictive: Deep Impact style",
-        ),
         "dt_s": F(
             "float",
             1.0,
@@ -254,51 +251,6 @@ SCHEMA = {
             units="s",
             doc="no burn in the last cutoff_tgo_s before the nominal impact",
         ),
-        "k1": F(
-            "float",
-            4.0,
-            lo=0.0,
-            lo_open=True,
-            hi=100.0,
-            doc="los: miss tolerance rho_max = k1 sqrt(E^2+F^2)",
-        ),
-        "k2": F(
-            "float",
-            1.0,
-            lo=0.0,
-            lo_open=True,
-            hi=100.0,
-            doc="los: shut-off rho_min = k2 sqrt(E^2+F^2); k2 <= k1",
-        ),
-        "temperature": F(
-            "float",
-            0.05,
-            lo=0.0,
-            lo_open=True,
-            hi=10.0,
-            doc="los: temperature of the relaxed switch (gradients only)",
-        ),
-        "burn_times_s": F(
-            "floats",
-            [1200.0, 4100.0, 6450.0, 6780.0],
-            lo=0.0,
-            min_length=1,
-            units="s",
-            doc="predictive: mission times of the burns",
-        ),
-        "newton_iterations": F("int", 4, lo=1, hi=50, doc="predictive: Newton iterations"),
-        "tolerance_m": F(
-            "float",
-            0.1,
-            lo=0.0,
-            lo_open=True,
-            hi=1e6,
-            units="m",
-            doc="predictive: predicted-miss tolerance of the Newton iteration",
-        ),
-        "predictor_steps": F(
-            "int", 4, lo=1, hi=10000, doc="predictive: RK4 steps per predictor segment"
-        ),
     },
 }
 
@@ -330,8 +282,6 @@ def check(cfg: dict) -> None:
             "approach.velocity_kmps: the impactor must approach the target "
             "(position . velocity < 0)"
         )
-    if g["k2"] > g["k1"]:
-        raise ScenarioError(f"guidance.k2: {g['k2']:g} > k1 = {g['k1']:g}; allowed: 0 < k2 <= k1")
     ratio = cam["image_interval_s"] / g["dt_s"]
     if abs(ratio - round(ratio)) > 1e-9:
         raise ScenarioError(
@@ -364,13 +314,4 @@ def check(cfg: dict) -> None:
     if math.hypot(*sun) == 0.0:
         raise ScenarioError(
             "dynamics.sun_direction: must be non-zero; allowed: any non-zero vector"
-        )
-    bt = g["burn_times_s"]
-    t_cut = tof - g["cutoff_tgo_s"]
-    if any(b2 - b1 < cam["image_interval_s"] for b1, b2 in zip(bt, bt[1:])) or any(
-        b >= t_cut for b in bt
-    ):
-        raise ScenarioError(
-            f"guidance.burn_times_s: {bt}; allowed: increasing, at least one image interval "
-            f"({cam['image_interval_s']:g} s) apart, each before the cut-off at {t_cut:g} s"
         )

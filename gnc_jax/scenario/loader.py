@@ -7,12 +7,8 @@ import pathlib
 import tomllib
 from typing import Any
 
-from . import capsule, impactor, midcourse, pn
-from .schema import ScenarioError, parse_override, validate
-
-#: scenario kind -> module with ``SCHEMA`` and ``check(config)``
-KINDS = {"impactor": impactor, "capsule": capsule, "midcourse": midcourse}
-KINDS["pn"] = pn
+from ..systems.base import get_system
+from .schema import ScenarioError, parse_override
 
 _META_FIELDS = {"name", "kind", "description", "reference", "runs", "seed"}
 
@@ -42,8 +38,16 @@ class Scenario:
     source: str
 
     def __getitem__(self, dotted: str) -> Any:
-        section, field = dotted.split(".")
-        return self.config[section][field]
+        """``scenario["guidance.los.k1"]``: a field by its dotted name."""
+        value: Any = self.config
+        for part in dotted.split("."):
+            value = value[part]
+        return value
+
+    @property
+    def system(self):
+        """The registered system (:class:`~gnc_jax.systems.AbstractSystem`) of this kind."""
+        return get_system(self.kind)
 
     def with_overrides(self, overrides) -> "Scenario":
         """A copy with ``section.field=value`` overrides applied (strings or a mapping)."""
@@ -54,10 +58,17 @@ class Scenario:
                 section, field, value = parse_override(item)
             else:
                 key, value = item
-                if key.count(".") != 1:
-                    raise ScenarioError(f"{key}: the key must be section.field")
-                section, field = key.split(".")
-            raw.setdefault(section, {})[field] = value
+                if not isinstance(key, str) or key.count(".") not in (1, 2):
+                    raise ScenarioError(
+                        f"{key}: the key must be section.field or section.table.field"
+                    )
+                section, field = key.rsplit(".", 1)
+            table = raw
+            for part in section.split("."):
+                table = table.setdefault(part, {})
+                if not isinstance(table, dict):
+                    raise ScenarioError(f"{section}.{field}: {section} is not a table")
+            table[field] = value
         return _build(self._meta(), raw, self.paper, self.source)
 
     def _meta(self) -> dict:
@@ -87,8 +98,7 @@ def _build(meta: dict, raw: dict, paper: dict, source: str) -> Scenario:
             f"allowed: {', '.join(sorted(_META_FIELDS))}"
         )
     kind = meta.get("kind")
-    if kind not in KINDS:
-        raise ScenarioError(f"scenario.kind: {kind!r}; allowed: one of {', '.join(KINDS)}")
+    system = get_system(kind) if isinstance(kind, str) else get_system(repr(kind))
     runs = meta.get("runs", 100)
     if isinstance(runs, bool) or not isinstance(runs, int) or runs <= 0:
         raise ScenarioError(f"scenario.runs: {runs!r}; allowed: an integer >= 1")
@@ -98,9 +108,7 @@ def _build(meta: dict, raw: dict, paper: dict, source: str) -> Scenario:
     for k, v in paper.items():
         if isinstance(v, bool) or not isinstance(v, (int, float, str)):
             raise ScenarioError(f"paper.{k}: expected a number or text, got {v!r}")
-    module = KINDS[kind]
-    config = validate(raw, module.SCHEMA)
-    module.check(config)
+    config = system.validate(raw)
     return Scenario(
         name=str(meta.get("name", "unnamed")),
         kind=kind,

@@ -71,9 +71,6 @@ SCHEMA = {
         ),
     },
     "guidance": {
-        "n0": F("float", 8.0, lo=0.0, lo_open=True, hi=100.0, doc="N0 of eq. 12"),
-        "k": F("float", 2.0, lo=0.0, hi=10.0, doc="exponent k of eq. 12; 0 = constant N = n0"),
-        "n_min": F("float", 2.0, lo=0.0, hi=100.0, doc="lower bound of N (eq. 12: 2)"),
         "coast_s": F(
             "float",
             600.0,
@@ -84,26 +81,6 @@ SCHEMA = {
         ),
         "dt_s": F(
             "float", 1.0, lo=0.0, lo_open=True, hi=60.0, units="s", doc="guidance/control step"
-        ),
-        "trigger_on": F(
-            "float",
-            1.0,
-            lo=0.0,
-            lo_open=True,
-            hi=1e6,
-            doc="Schmitt on-threshold a_on in units of a_ref = n_min x (minimum impulse bit) / "
-            "coast_s, the command change one pulse causes at the start of the coast",
-        ),
-        "trigger_off": F(
-            "float",
-            0.5,
-            lo=0.0,
-            lo_open=True,
-            hi=1e6,
-            doc="Schmitt off-threshold a_off in units of a_ref; trigger_off < trigger_on",
-        ),
-        "temperature": F(
-            "float", 0.05, lo=0.0, lo_open=True, hi=10.0, doc="relaxed trigger (gradients only)"
         ),
         "coast_steps": F(
             "int", 60, lo=1, hi=100000, doc="RK4 steps of the final unpowered coast to the B-plane"
@@ -192,11 +169,6 @@ def check(cfg: dict) -> None:
     if not g["coast_s"] < tof:
         raise ScenarioError(
             f"guidance.coast_s: {g['coast_s']:g}; allowed: [0, {tof:.6g}) s (time of flight)"
-        )
-    if g["trigger_off"] >= g["trigger_on"]:
-        raise ScenarioError(
-            f"guidance.trigger_off: {g['trigger_off']:g} >= trigger_on = {g['trigger_on']:g}; "
-            "allowed: 0 < trigger_off < trigger_on"
         )
     if sc["pulse_width_s"] > g["dt_s"]:
         raise ScenarioError(

@@ -100,47 +100,97 @@ class Field:
 
 
 Schema = dict[str, dict[str, Field]]  # section -> field name -> Field
+"""A section name may be dotted, ``"guidance.los"``: a sub-table ``[guidance.los]`` of the file."""
 
 
-def validate(config: dict, schema: Schema, where: str = "") -> dict:
+def _lookup(config: dict, section: str) -> Any:
+    value: Any = config
+    for part in section.split("."):
+        value = value.get(part, {}) if isinstance(value, dict) else {}
+    return value
+
+
+def _moved_hint(schema: Schema, section: str, name: str) -> str:
+    """Where a field now lives when a sub-table of ``section`` declares it (old flat keys)."""
+    homes = [s for s, fields in schema.items() if s.startswith(section + ".") and name in fields]
+    if not homes:
+        return ""
+    return f"; it moved to [{homes[0]}]; allowed: {homes[0]}.{name}"
+
+
+def validate(config: dict, schema: Schema, where: str = "", optional=frozenset()) -> dict:
     """Fill defaults and check every field of ``config`` against ``schema``.
 
-    Returns a new nested dict ``{section: {field: value}}`` holding every declared field.
+    Sections named in ``optional`` (e.g. the sub-tables of the laws a scenario does not fly) are
+    checked and kept when the file gives them and left out otherwise; every other section is
+    filled with its defaults. Returns a new nested dict ``{section: {field: value}}`` (dotted
+    sections nested: ``out["guidance"]["los"]``).
     """
-    out: dict[str, dict[str, Any]] = {}
+    tops = {s.split(".")[0] for s in schema}
     for section, value in config.items():
-        if section not in schema:
+        if section not in tops:
             raise ScenarioError(
-                f"{where}{section}: unknown section; allowed: {', '.join(sorted(schema))}"
+                f"{where}{section}: unknown section; allowed: {', '.join(sorted(tops))}"
             )
         if not isinstance(value, dict):
             raise ScenarioError(f"{where}{section}: expected a table of fields, got {value!r}")
-        for name in value:
-            if name not in schema[section]:
+        for name, item in value.items():
+            if f"{section}.{name}" in schema:
+                if not isinstance(item, dict):
+                    raise ScenarioError(
+                        f"{where}{section}.{name}: expected a table [{section}.{name}], "
+                        f"got {item!r}"
+                    )
+                for sub in item:
+                    if sub not in schema[f"{section}.{name}"]:
+                        raise ScenarioError(
+                            f"{where}{section}.{name}.{sub}: unknown field; allowed in "
+                            f"[{section}.{name}]: " + ", ".join(schema[f"{section}.{name}"])
+                        )
+            elif name not in schema.get(section, {}):
+                subs = sorted(s for s in schema if s.startswith(section + "."))
+                extra = f"; sub-tables: {', '.join(f'[{s}]' for s in subs)}" if subs else ""
                 raise ScenarioError(
-                    f"{where}{section}.{name}: unknown field; allowed in [{section}]: "
-                    + ", ".join(sorted(schema[section]))
+                    f"{where}{section}.{name}: unknown field"
+                    + (
+                        _moved_hint(schema, section, name)
+                        or f"; allowed in [{section}]: "
+                        + ", ".join(sorted(schema.get(section, {})))
+                        + extra
+                    )
                 )
+    out: dict[str, dict[str, Any]] = {}
     for section, fields in schema.items():
-        given = config.get(section, {})
-        out[section] = {
+        given = _lookup(config, section)
+        if section in optional and not given:
+            continue
+        checked = {
             name: field.check(f"{where}{section}.{name}", given.get(name, field.default))
             for name, field in fields.items()
         }
+        head, _, sub = section.partition(".")
+        if sub:
+            out.setdefault(head, {})[sub] = checked
+        else:
+            out.setdefault(head, {}).update(checked)
     return out
 
 
 def parse_override(text: str) -> tuple[str, str, Any]:
-    """Parse ``section.field=value`` (value in TOML syntax; a bare word is a string)."""
+    """Parse ``section[.table].field=value`` into ``(section, field, value)`` (value in TOML
+    syntax; a bare word is a string); ``section`` may be dotted (``guidance.los``)."""
     import tomllib
 
     if "=" not in text:
         raise ScenarioError(f"--set {text}: expected section.field=value")
     key, raw = text.split("=", 1)
     key = key.strip()
-    if key.count(".") != 1:
-        raise ScenarioError(f"--set {text}: the key must be section.field, e.g. guidance.k1=4")
-    section, name = key.split(".")
+    if key.count(".") not in (1, 2) or not all(key.split(".")):
+        raise ScenarioError(
+            f"--set {text}: the key must be section.field or section.table.field, "
+            "e.g. guidance.los.k1=4"
+        )
+    section, name = key.rsplit(".", 1)
     try:
         value = tomllib.loads(f"v = {raw.strip()}")["v"]
     except tomllib.TOMLDecodeError:

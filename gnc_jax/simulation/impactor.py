@@ -422,13 +422,12 @@ def _target_model(tg: dict, sun_direction) -> TargetModel:
     )
 
 
-def build(scenario) -> tuple[ImpactorSimulation, AbstractImpactorGuidance]:
-    """Simulation data and guidance law of a validated impactor :class:`Scenario` (SI units)."""
+def build(scenario) -> ImpactorSimulation:
+    """Simulation data of a validated impactor :class:`Scenario` (SI units); the guidance law
+    is built by the system from ``[guidance.<law>]`` (``systems.impactor``)."""
     import math
 
     from ..geometry.bplane import b_plane_frame, check_b_plane_frame
-    from ..guidance.los import LOSSwitchingCurveGuidance
-    from ..guidance.predictive import PredictiveGuidance
     from ..scenario.impactor import time_of_flight_s
 
     cfg = scenario.config
@@ -498,19 +497,10 @@ def build(scenario) -> tuple[ImpactorSimulation, AbstractImpactorGuidance]:
         consider_attitude_bias=f(1.0 if nv["consider_attitude_bias"] else 0.0),
         n_images=int(math.ceil(t_cut / image_dt - 1e-9)),
         steps_per_image=int(round(image_dt / g["dt_s"])),
-        coast_steps=int(g["predictor_steps"]),
+        coast_steps=int(dy["coast_steps"]),
         measurement=nv["measurement"],
         camera=_camera_model(cam),
         target=_target_model(cfg["target"], sun / jnp.linalg.norm(sun)),
         phase_correction=f(1.0 if nv["phase_correction"] else 0.0),
     )
-    if g["law"] == "los":
-        law = LOSSwitchingCurveGuidance(f(g["k1"]), f(g["k2"]), f(g["temperature"]))
-    else:
-        law = PredictiveGuidance(
-            burn_times_s=f(g["burn_times_s"]),
-            tolerance_m=f(g["tolerance_m"]),
-            newton_iterations=int(g["newton_iterations"]),
-            predictor_steps=int(g["predictor_steps"]),
-        )
-    return sim, law
+    return sim

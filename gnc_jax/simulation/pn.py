@@ -125,17 +125,6 @@ class _Carry(NamedTuple):
 _KNOW_POS, _KNOW_VEL, _IMAGES, _STEPS = range(4)
 
 
-def trigger_scale(thrust_n, mass_kg, pulse_width_s, n_min, coast_s):
-    """a_ref = n_min q / t_coast with q = F tau / m the minimum impulse bit, m/s^2.
-
-    One pulse perpendicular to the LOS at time-to-go t_go changes the PN command by
-    N q / t_go; a_ref is that change for the minimum gain at the start of the coast. A command
-    below it asks for less than one pulse can deliver cleanly at the last firing opportunity,
-    and its zero-effort miss a_ref t_coast^2 / n_min equals the miss one pulse moves there.
-    """
-    return n_min * thrust_n * pulse_width_s / mass_kg / coast_s
-
-
 def _initial_nav(sim: PNSimulation, key):
     err = sim.errors
     mask = jnp.array([1.0, 1.0, 0.0]) if sim.planar else jnp.ones(3)
@@ -334,8 +323,9 @@ def initial_state(cfg: dict) -> tuple[InterceptState, bool]:
     return y0, planar
 
 
-def build(scenario) -> tuple[PNSimulation, AugmentedPNGuidance]:
-    """Simulation data and guidance law of a validated pn :class:`Scenario` (SI units)."""
+def build(scenario) -> PNSimulation:
+    """Simulation data of a validated intercept :class:`Scenario` (SI units); the law is built
+    by the system from ``[guidance.apn]`` (``systems.intercept``)."""
     import math
 
     import numpy as np
@@ -391,18 +381,7 @@ def build(scenario) -> tuple[PNSimulation, AugmentedPNGuidance]:
         steps_per_image=int(round(image_dt / g["dt_s"])),
         coast_steps=int(g["coast_steps"]),
     )
-    scale = trigger_scale(
-        sc["thrust_n"], sc["mass_kg"], sc["pulse_width_s"], g["n_min"], g["coast_s"]
-    )
-    law = AugmentedPNGuidance(
-        n0=f(g["n0"]),
-        k=f(g["k"]),
-        a_on_mps2=f(g["trigger_on"] * scale),
-        a_off_mps2=f(g["trigger_off"] * scale),
-        n_min=f(g["n_min"]),
-        temperature=f(g["temperature"]),
-    )
-    return sim, law
+    return sim
 
 
 def estimate_pulse_trains(scenario):
@@ -413,7 +392,9 @@ def estimate_pulse_trains(scenario):
     Z0 and T come from the law's own view of the initial truth: Z0 = |A| T^2 / N with the
     augmented command of eq. 11 (so the solar differential is included) and T = R / V_c.
     """
-    sim, law = build(scenario)
+    from ..systems import get_system  # the law is built by the system (it imports this module)
+
+    sim, law = get_system(scenario.kind).build(scenario)
     cfg = scenario.config
     y0 = sim.y0
     a1, _ = augmented_pn_command(PNNavigation(y0.r, y0.v, y0.r_target), 1.0, sim.dynamics)

@@ -1,0 +1,230 @@
+"""The system contract: one abstract class, one registry.
+
+A *system* (the impactor, the capsule, the midcourse transfer, the intercept, or one a user
+adds) is everything gnc_jax needs to run a scenario of that kind:
+
+* its scenario schema — the file sections with units, ranges, defaults and meaning — plus the
+  ``[guidance.<law>]`` table of each law of its guidance family (derived from the laws' declared
+  parameters) and its cross-field checks;
+* ``build(scenario) -> (params, law)``: the scenario data as a pytree (SI units) and the law;
+* ``simulate(params, law, key, record=False) -> (outcome, trace)``: one run, pure and jit-able;
+  ``outcome`` a NamedTuple whose first field is ``status``;
+* ``statistics(outcomes, ok)``: its summary statistics over the ``ok`` runs;
+* ``figures(summary, runs, scenario, out)``: its report figures;
+* ``paper_labels``: how the published metrics read in ``gnc-jax reproduce``;
+* ``tunable`` and ``metrics``: the scenario names of its tunable leaves and the summary keys
+  that tuning objectives and envelope maps read;
+* ``example`` and ``test_overrides``: a scenario and the overrides that make it cheap, with
+  which the family tests exercise every registered system and law.
+
+Loader, Monte Carlo, results, report, reproduction and the CLI ask the registry
+(:func:`get_system`); nothing else tests a scenario's kind. A new system is one subclass and one
+:func:`register_system` call, from inside the package or from a user's code.
+"""
+
+import abc
+import importlib
+import importlib.metadata
+import os
+from typing import Any, ClassVar
+
+from ..params import declared_params, file_name, schema_of
+from ..scenario.schema import Field, ScenarioError, Schema, validate
+
+_REGISTRY: dict[str, "AbstractSystem"] = {}
+
+
+class AbstractSystem(abc.ABC):
+    """Base class of every system (see the module docstring).
+
+    Class attributes:
+        name: the scenario ``kind`` that selects this system.
+        description: one line for ``gnc-jax list --fields`` and the docs.
+        sections: the schema of the scenario sections (without the law tables).
+        law_family: the guidance-law family base (``None`` when the system has no choice of
+            law); its registered laws are the allowed values of ``guidance.law``.
+        default_law: the law used when a scenario does not name one.
+        tunable: scenario names of the differentiable leaves a user may tune, e.g.
+            ``"guidance.los.k1"``.
+        metrics: summary keys that objectives and envelope maps may read.
+        paper_labels: ``{summary key: label}`` for the paper-vs-gnc_jax tables.
+        example: a packaged scenario name (or a TOML path) of this system.
+        test_overrides: ``{"section.field": value}`` that make ``example`` cheap for tests.
+    """
+
+    name: ClassVar[str]
+    description: ClassVar[str] = ""
+    sections: ClassVar[Schema] = {}
+    law_family: ClassVar[type | None] = None
+    default_law: ClassVar[str] = ""
+    tunable: ClassVar[tuple[str, ...]] = ()
+    metrics: ClassVar[tuple[str, ...]] = ()
+    paper_labels: ClassVar[dict[str, str]] = {}
+    example: ClassVar[str] = ""
+    test_overrides: ClassVar[dict[str, Any]] = {}
+
+    # ---- scenario ----
+    def laws(self) -> dict[str, type]:
+        """``{name: law class}`` of the registered laws of this system's family."""
+        return dict(self.law_family.laws) if self.law_family is not None else {}
+
+    def law_name(self, raw: dict) -> str:
+        """The law a (raw or validated) configuration flies."""
+        guidance = raw.get("guidance", {})
+        name = guidance.get("law", self.default_law) if isinstance(guidance, dict) else ""
+        return name if isinstance(name, str) else ""
+
+    def schema(self) -> Schema:
+        """Every section, with ``guidance.law`` and one ``[guidance.<law>]`` table per law."""
+        out = {k: dict(v) for k, v in self.sections.items()}
+        laws = self.laws()
+        if laws:
+            out.setdefault("guidance", {})
+            out["guidance"] = {
+                "law": Field(
+                    "str",
+                    self.default_law or next(iter(laws)),
+                    choices=tuple(laws),
+                    doc="guidance law; its gains are in [guidance.<law>]",
+                ),
+                **out["guidance"],
+            }
+            for name, cls in laws.items():
+                out[f"guidance.{name}"] = schema_of(cls)
+        return out
+
+    def validate(self, raw: dict, where: str = "") -> dict:
+        """Fill defaults and check ``raw`` (types, ranges, then :meth:`check`)."""
+        laws = self.laws()
+        chosen = self.law_name(raw)
+        optional = {f"guidance.{n}" for n in laws if n != chosen}
+        config = validate(raw, self.schema(), where, optional)
+        if laws:
+            law = laws[config["guidance"]["law"]]
+            law.check(config["guidance"][law.law_name], config)
+        self.check(config)
+        return config
+
+    def check(self, config: dict) -> None:
+        """Cross-field checks of a validated configuration (raise :class:`ScenarioError`)."""
+        return None
+
+    # ---- simulation ----
+    def build_law(self, config: dict, ctx=None):
+        """The guidance law a validated configuration flies (``None`` without a family)."""
+        laws = self.laws()
+        if not laws:
+            return None
+        cls = laws[config["guidance"]["law"]]
+        return cls.from_config(config["guidance"][cls.law_name], config, ctx)
+
+    @abc.abstractmethod
+    def build(self, scenario) -> tuple[Any, Any]:
+        """``(params, law)`` of a validated scenario, in SI units."""
+
+    @abc.abstractmethod
+    def simulate(self, params, law, key, record: bool = False):
+        """One run: ``(outcome, trace)``; ``trace`` is ``None`` unless ``record``."""
+
+    # ---- results ----
+    def statistics(self, outcomes: dict, ok) -> dict[str, Any]:
+        """Summary statistics over the ``ok`` runs (``{}`` when there are none)."""
+        return {}
+
+    def smooth_objective(self, outcomes):
+        """A differentiable scalar of a batch of outcomes (a NamedTuple of arrays with the run
+        on the first axis), for gradient checks and as the default tuning objective; ``None``
+        when the system has none."""
+        return None
+
+    def figures(self, summary: dict, runs: dict, scenario, out) -> list:
+        """Write the report figures into the directory ``out``; return their paths."""
+        return []
+
+    def __repr__(self) -> str:
+        return f"<system {self.name!r}>"
+
+
+def register_system(system):
+    """Register a system (a subclass of :class:`AbstractSystem`, or an instance) under its
+    ``name``; usable as a class decorator. Registering another object under a name that is
+    taken is an error; registering the same class again replaces the instance."""
+    instance = system() if isinstance(system, type) else system
+    if not isinstance(instance, AbstractSystem):
+        raise TypeError(f"{system!r} is not an AbstractSystem")
+    name = instance.name
+    old = _REGISTRY.get(name)
+    if old is not None and type(old).__qualname__ != type(instance).__qualname__:
+        raise ValueError(f"a system named {name!r} is already registered ({old!r})")
+    _REGISTRY[name] = instance
+    return system
+
+
+PLUGINS_ENV = "GNC_JAX_PLUGINS"
+"""Environment variable: comma-separated modules to import before the registry is read (a
+user's systems, laws and measurements register themselves on import); installed packages can
+instead declare entry points in the group ``gnc_jax.plugins``."""
+
+_loaded = False
+
+
+def _load_builtin() -> None:
+    global _loaded
+    if _loaded:
+        return
+    _loaded = True
+    # The built-in systems register themselves when their modules are imported; imported here,
+    # on first use, because they import the scenario package that imports this module.
+    from . import capsule, impactor, intercept, midcourse  # noqa: F401
+
+    for entry in importlib.metadata.entry_points(group="gnc_jax.plugins"):
+        entry.load()
+    for name in filter(None, os.environ.get(PLUGINS_ENV, "").split(",")):
+        try:
+            importlib.import_module(name.strip())
+        except ImportError as e:
+            raise ScenarioError(
+                f"{PLUGINS_ENV}: cannot import {name.strip()!r} ({e}); allowed: importable "
+                "module names separated by commas"
+            ) from None
+
+
+def get_system(name: str) -> AbstractSystem:
+    """The registered system of scenario kind ``name``."""
+    _load_builtin()
+    if name not in _REGISTRY:
+        raise ScenarioError(f"scenario.kind: {name!r}; allowed: one of {', '.join(_REGISTRY)}")
+    return _REGISTRY[name]
+
+
+def systems() -> dict[str, AbstractSystem]:
+    """Every registered system by name."""
+    _load_builtin()
+    return dict(_REGISTRY)
+
+
+def law_parameters(law_cls) -> dict[str, str]:
+    """``{attribute: file name}`` of a law's declared parameters."""
+    return {a: file_name(a, s) for a, s in declared_params(law_cls).items()}
+
+
+def tunable_leaf(system: AbstractSystem, name: str):
+    """``(where, attribute)`` of a tunable scenario name: ``("law", "k1")`` for
+    ``guidance.<law>.k1``. Only law gains are tunable leaves so far."""
+    parts = name.split(".")
+    if len(parts) == 3 and parts[0] == "guidance":
+        cls = system.laws().get(parts[1])
+        if cls is not None:
+            for attribute, file in law_parameters(cls).items():
+                if file == parts[2]:
+                    return "law", attribute
+    raise ScenarioError(f"{name}: not a tunable leaf of {system.name}; allowed: {system.tunable}")
+
+
+__all__ = [
+    "AbstractSystem",
+    "register_system",
+    "get_system",
+    "systems",
+    "tunable_leaf",
+]

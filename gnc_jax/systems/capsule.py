@@ -1,0 +1,241 @@
+"""The capsule system: a lunar-return skip entry with the combined predictor-corrector /
+reference-trajectory guidance of seed 003.
+
+Truth, actuator and sensors are in :mod:`gnc_jax.simulation.capsule`; the law in
+:mod:`gnc_jax.guidance.skip_entry`; the scenario sections in :mod:`gnc_jax.scenario.capsule`.
+"""
+
+import pathlib
+from typing import Any, ClassVar
+
+import jax.numpy as jnp
+import numpy as np
+
+from .._status import Status
+from ..montecarlo import simulate_traces
+from ..plotting import ellipse_xy, pyplot, saver
+from ..scenario import capsule as capsule_scenario
+from ..simulation import capsule as capsule_sim
+from .base import AbstractSystem, register_system
+
+
+def _interval(x: np.ndarray) -> dict[str, Any]:
+    m, s = float(np.mean(x)), float(np.std(x))
+    return dict(
+        mean=m,
+        std=s,
+        min=float(np.min(x)),
+        max=float(np.max(x)),
+        three_sigma=[m - 3 * s, m + 3 * s],
+    )
+
+
+def _capsule_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
+    if not ok.any():
+        return {}
+    out: dict[str, Any] = {
+        "downrange_err_km": _interval(o["downrange_err_km"][ok]),
+        "crossrange_err_km": _interval(o["crossrange_err_km"][ok]),
+        "downrange_err_km_3sigma": "{:.2f} .. {:.2f}".format(
+            *_interval(o["downrange_err_km"][ok])["three_sigma"]
+        ),
+        "crossrange_err_km_3sigma": "{:.2f} .. {:.2f}".format(
+            *_interval(o["crossrange_err_km"][ok])["three_sigma"]
+        ),
+        # the empirical interval holding 99.73 % of the runs (what mean +- 3 std means for a
+        # Gaussian), which a few heavy-tailed runs do not stretch
+        **{
+            f"{name}_central_99_73": "{:.2f} .. {:.2f}".format(
+                *np.percentile(o[name][ok], [0.135, 99.865])
+            )
+            for name in ("downrange_err_km", "crossrange_err_km")
+        },
+        **{
+            f"{name}_outside_2p5_km": int(np.sum(np.abs(o[name][ok]) > 2.5))
+            for name in ("downrange_err_km", "crossrange_err_km")
+        },
+        "load_peak_g_max": float(np.max(o["load_peak_g"][ok])),
+        "load_peak_g_mean": float(np.mean(o["load_peak_g"][ok])),
+        "heat_rate_peak_kw_m2_max": float(np.max(o["heat_rate_peak_kw_m2"][ok])),
+        "heat_load_mj_m2_max": float(np.max(o["heat_load_mj_m2"][ok])),
+        "skip_apogee_km_mean": float(np.mean(o["skip_apogee_km"][ok])),
+        "predictions_mean": float(np.mean(o["predictions"][ok])),
+        "predictions_max": int(np.max(o["predictions"][ok])),
+        "cycle_predictions_max_mean": float(np.mean(o["cycle_predictions_max"][ok])),
+        "cycle_predictions_max": int(np.max(o["cycle_predictions_max"][ok])),
+        "pc_cycles_mean": float(np.mean(o["pc_cycles"][ok])),
+        "corrector_failures_total": int(np.sum(o["corrector_failures"][ok])),
+        "reversals_mean": float(np.mean(o["reversals"][ok])),
+    }
+    for name in ("switch_speed_mps", "switch_altitude_km", "switch_hdot_mps", "switch_range_km"):
+        out[f"{name}_mean"] = float(np.mean(o[name][ok]))
+        out[f"{name}_3sigma"] = _interval(o[name][ok])["three_sigma"]
+    return out
+
+
+def capsule_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib.Path]:
+    """Seed 003 Figs. 4-6 (predictions, altitude-range fan, chute scatter), bank histories and
+    the chute miss against the dispersed L/D."""
+    plt = pyplot()
+    files = []
+
+    save = saver(plt, out, files)
+
+    ok = runs["status"] == Status.ok
+    n_ok = int(ok.sum())
+    dr, cr = runs["downrange_err_km"][ok], runs["crossrange_err_km"][ok]
+    paper = scenario.paper
+
+    # Fig. 6: chute-deploy points with the 1-sigma and 3-sigma ellipses.
+    fig, ax = plt.subplots(figsize=(6.4, 6.0))
+    ax.scatter(cr, dr, s=5, alpha=0.5, label=f"chute deploy ({n_ok} runs)")
+    ax.plot(0, 0, "r+", ms=14, mew=2, label="target")
+    if n_ok > 2:
+        xy = np.stack([cr, dr], axis=1)
+        for k, style in ((1, "-"), (3, "--")):
+            e = ellipse_xy(xy.mean(axis=0), np.cov(xy.T), k)
+            ax.plot(e[0], e[1], "k" + style, lw=1, label=f"{k}σ ellipse")
+    ax.add_patch(
+        plt.Rectangle((-2.5, -2.5), 5, 5, fill=False, ec="C2", lw=1, label="±2.5 km (issue)")
+    )
+    try:
+        lo_d, hi_d = (float(x) for x in str(paper["downrange_err_km_3sigma"]).split(".."))
+        lo_c, hi_c = (float(x) for x in str(paper["crossrange_err_km_3sigma"]).split(".."))
+        ax.add_patch(
+            plt.Rectangle(
+                (lo_c, lo_d),
+                hi_c - lo_c,
+                hi_d - lo_d,
+                fill=False,
+                ec="C3",
+                ls=":",
+                lw=1.2,
+                label="paper 3σ intervals",
+            )
+        )
+    except (KeyError, ValueError):
+        pass
+    ax.set_xlabel("crossrange error (km, > 0 left)")
+    ax.set_ylabel("downrange error (km, > 0 overshoot)")
+    ax.set_title(
+        f"{scenario.name}: chute deploy (seed 003 Fig. 6)\n"
+        f"3σ downrange {summary.get('downrange_err_km_3sigma')}, "
+        f"crossrange {summary.get('crossrange_err_km_3sigma')} km"
+    )
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="upper right")
+    save(fig, "chute_scatter.png")
+
+    # Fig. 4: predictions per trajectory and the largest count in one guidance cycle.
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.8))
+    a1.hist(runs["predictions"][ok], bins=40, color="C0")
+    a1.axvline(np.mean(runs["predictions"][ok]), color="k", ls="--", label="mean (gnc_jax)")
+    if "predictions_mean" in paper:
+        a1.axvline(float(paper["predictions_mean"]), color="C3", ls=":", label="mean (paper)")
+    a1.set_xlabel("predictions per trajectory (early-exit count)")
+    a1.set_ylabel("runs")
+    a1.legend(fontsize=8)
+    c = runs["cycle_predictions_max"][ok].astype(int)
+    a2.bar(np.arange(c.max() + 1), np.bincount(c), color="C1")
+    a2.set_xlabel("most predictions in one corrector cycle")
+    a2.set_ylabel("runs")
+    fig.suptitle(f"{scenario.name}: predictor calls (seed 003 Fig. 4)")
+    save(fig, "predictions.png")
+
+    # Chute miss against the dispersed lift-to-drag ratio (where the tails come from).
+    d = scenario.config["dispersions"]
+    z = np.stack([runs[f"dispersion_{j}"] for j in range(10)], axis=1)[ok]
+    ld = (1.0 + d["cl_pct"] / 300.0 * z[:, 6]) / (1.0 + d["cd_pct"] / 300.0 * z[:, 7])
+    fig, ax = plt.subplots(figsize=(7, 4))
+    ax.semilogy(ld, np.maximum(np.hypot(dr, cr), 1e-3), ".", ms=3)
+    ax.axhline(2.5, color="C2", lw=1, label="2.5 km")
+    ax.set_xlabel("actual L/D over nominal L/D")
+    ax.set_ylabel("chute miss (km)")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    ax.set_title(f"{scenario.name}: chute miss against the dispersed L/D")
+    save(fig, "miss_vs_ld.png")
+
+    # Fig. 5: altitude against range flown for every run; bank histories of the first runs.
+    every = 5
+    _, tr = simulate_traces(scenario, np.flatnonzero(ok), seed=summary.get("seed"), every=every)
+    live = tr["phase"] < 4
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    for i in range(len(tr["t_s"])):
+        m = live[i]
+        ax.plot(tr["range_flown_m"][i][m] / 1e3, tr["altitude_m"][i][m] / 1e3, lw=0.4, alpha=0.3)
+    ax.axvline(scenario.config["entry"]["range_km"], color="k", ls="--", lw=1, label="target")
+    ax.set_xlabel("range flown from the entry point (km)")
+    ax.set_ylabel("altitude (km)")
+    ax.set_title(
+        f"{scenario.name}: altitude against range, {len(tr['t_s'])} runs (seed 003 Fig. 5)"
+    )
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    save(fig, "altitude_range_fan.png")
+
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
+    for i in range(min(20, len(tr["t_s"]))):
+        m = live[i]
+        a1.plot(tr["t_s"][i][m], np.degrees(tr["bank_rad"][i][m]), lw=0.7)
+        a2.plot(tr["t_s"][i][m], tr["load_g"][i][m], lw=0.7)
+    a1.set_ylabel("bank flown (deg)")
+    a2.set_ylabel("sensed load (g)")
+    a2.set_xlabel("time from entry interface (s)")
+    a1.grid(alpha=0.3)
+    a2.grid(alpha=0.3)
+    fig.suptitle(f"{scenario.name}: bank angle and load, first {min(20, len(tr['t_s']))} runs")
+    save(fig, "bank_histories.png")
+    return files
+
+
+@register_system
+class CapsuleSystem(AbstractSystem):
+    name = "capsule"
+    description = "lunar-return skip entry: predictor-corrector and reference tracking"
+    sections = capsule_scenario.SCHEMA
+    tunable = (
+        "guidance.k_drag_load",
+        "guidance.k_hdot",
+        "guidance.k_range",
+        "guidance.k_range_rate",
+    )
+    metrics = ("downrange_err_km", "crossrange_err_km", "load_peak_g_max", "predictions_mean")
+    paper_labels: ClassVar[dict[str, str]] = {
+        "downrange_err_km_3sigma": "downrange 3σ (km)",
+        "crossrange_err_km_3sigma": "crossrange 3σ (km)",
+        "downrange_err_km_central_99_73": "downrange central 99.73 % (km)",
+        "crossrange_err_km_central_99_73": "crossrange central 99.73 % (km)",
+        "downrange_err_km_outside_2p5_km": "runs with |downrange| > 2.5 km",
+        "crossrange_err_km_outside_2p5_km": "runs with |crossrange| > 2.5 km",
+        "switch_speed_mps_mean": "switch V mean (m/s)",
+        "switch_altitude_km_mean": "switch H mean (km)",
+        "switch_hdot_mps_mean": "switch Ḣ mean (m/s)",
+        "switch_range_km_mean": "switch range mean (km)",
+        "predictions_mean": "predictions/traj mean",
+        "predictions_max": "predictions/traj max",
+        "cycle_predictions_max_mean": "max per cycle, mean",
+        "cycle_predictions_max": "max per cycle, max",
+    }
+    example = "lunar-skip-entry"
+    test_overrides: ClassVar[dict[str, Any]] = {}
+
+    def check(self, config):
+        capsule_scenario.check(config)
+
+    def build(self, scenario):
+        return capsule_sim.build(scenario)
+
+    def simulate(self, params, law, key, record=False):
+        return capsule_sim.simulate(params, law, key, record=record)
+
+    def smooth_objective(self, outcomes):
+        """Mean squared chute-deploy error (km^2)."""
+        return jnp.mean(outcomes.downrange_err_km**2 + outcomes.crossrange_err_km**2)
+
+    def statistics(self, outcomes, ok):
+        return _capsule_statistics(outcomes, ok)
+
+    def figures(self, summary, runs, scenario, out):
+        return capsule_figures(summary, runs, scenario, out)

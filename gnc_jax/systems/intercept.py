@@ -1,0 +1,201 @@
+"""The intercept system: a deep-space impactor on a heliocentric intercept with augmented PN
+and pulse firing (seed 004).
+
+Truth, camera, EKF, law and pulses are in :mod:`gnc_jax.simulation.pn`; the laws in the family
+:class:`~gnc_jax.guidance.base.AbstractInterceptGuidance` (``apn``); the scenario sections in
+:mod:`gnc_jax.scenario.pn`.
+"""
+
+import pathlib
+from typing import Any, ClassVar
+
+import jax.numpy as jnp
+import numpy as np
+
+from .._status import Status
+from ..guidance.base import AbstractInterceptGuidance
+from ..montecarlo import simulate_one
+from ..plotting import ellipse_xy, pyplot, saver
+from ..scenario import pn as intercept_scenario
+from ..simulation import pn as intercept_sim
+from .base import AbstractSystem, register_system
+from .impactor import impact_statistics
+
+
+def _intercept_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
+    """Seed 004: miss (B-plane), total Δv, firings (pulse trains), as the impactor plus extras."""
+    if not ok.any():
+        return {}
+    out = impact_statistics(o, ok)
+    miss = o["miss_m"][ok]
+    out.update(
+        miss_std_m=float(np.std(miss)),
+        miss_t_std_m=float(np.std(o["miss_t_m"][ok])),
+        miss_r_std_m=float(np.std(o["miss_r_m"][ok])),
+        dv_min_mps=float(np.min(o["dv_mps"][ok])),
+        ignitions_mean=float(np.mean(o["ignitions"][ok])),
+        pulses_mean=float(np.mean(o["pulses"][ok])),
+        last_firing_s_mean=float(np.mean(o["last_firing_s"][ok])),
+        nav_position_error_m_rms=float(np.sqrt(np.mean(o["nav_position_error_m"][ok] ** 2))),
+    )
+    return out
+
+
+def _pn_command_panel(ax, trace, law, title):
+    """Seed 004 Figs. 7-9: the continuous APN command against time, with the engine pulses."""
+    t_h = trace.t_s / 3600.0
+    r = trace.r_m
+    u = -r / np.linalg.norm(r, axis=1, keepdims=True)
+    planar = np.allclose(r[:, 2], 0.0)
+    if planar:  # signed, as in the paper: the component along the LOS turned by +90 deg
+        a = trace.command_mps2[:, 0] * -u[:, 1] + trace.command_mps2[:, 1] * u[:, 0]
+        label = "A (eq. 11), in-plane normal to the LOS"
+    else:
+        a = np.linalg.norm(trace.command_mps2, axis=1)
+        label = "|A| (eq. 11)"
+    on = trace.engine_on > 0.5
+    ax.plot(t_h, a, lw=0.8, color="C0", label=label)
+    a_on, a_off = float(law.a_on_mps2), float(law.a_off_mps2)
+    for sign in (1, -1) if planar else (1,):
+        ax.axhline(sign * a_on, color="C3", ls="--", lw=0.8)
+        ax.axhline(sign * a_off, color="C2", ls=":", lw=0.8)
+    ax.plot([], [], "C3--", lw=0.8, label=f"a_on = {a_on:.3g} m/s²")
+    ax.plot([], [], "C2:", lw=0.8, label=f"a_off = {a_off:.3g} m/s²")
+    ax.set_yscale("symlog", linthresh=a_off)
+    ymax = max(np.abs(a).max(), a_on) * 1.5
+    ax.set_ylim(-ymax if planar else 0.0, ymax)
+    ax.vlines(t_h[on], -ymax if planar else 0.0, ymax, color="C1", alpha=0.25, lw=0.6)
+    ax.plot([], [], color="C1", alpha=0.5, label=f"engine pulses ({on.sum()} steps)")
+    ax.set_ylabel("command (m/s²)")
+    ax.set_title(title, fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper left", fontsize=7)
+
+
+def intercept_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib.Path]:
+    """Seed 004: command histories (Figs. 7-9), B-plane misses (Fig. 10), Δv and firings."""
+    plt = pyplot()
+    ok = runs["status"] == Status.ok
+    files = []
+
+    save = saver(plt, out, files)
+
+    # Run 0 of the study, then the three laws of Table 3 error-free from the same scenario.
+    _, law = InterceptSystem().build(scenario)
+    _, trace = simulate_one(scenario, index=0, seed=summary.get("seed"))
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    g = scenario.config["guidance"]["apn"]
+    _pn_command_panel(ax, trace, law, f"{scenario.name}, run 0: N0 = {g['n0']:g}, k = {g['k']:g}")
+    ax.set_xlabel("mission time (h)")
+    save(fig, "command_trace.png")
+
+    ideal = {"navigation.model": "perfect", "errors.attitude_urad": 0.0}
+    ideal["navigation.knowledge_position_km"] = [0.0, 0.0, 0.0]
+    ideal["navigation.knowledge_velocity_mps"] = 0.0
+    cases = (
+        ("variable N (N0 = 8, k = 2), Fig. 7", 8.0, 2.0),
+        ("constant N = 3, Fig. 8", 3.0, 0.0),
+        ("constant N = 8, Fig. 9", 8.0, 0.0),
+    )
+    fig, axes = plt.subplots(3, 1, figsize=(10, 10), sharex=True)
+    for ax, (title, n0, k) in zip(axes, cases):
+        sc = scenario.with_overrides({**ideal, "guidance.apn.n0": n0, "guidance.apn.k": k})
+        o, tr = simulate_one(sc, index=0, seed=0)
+        _, law_k = InterceptSystem().build(sc)
+        _pn_command_panel(
+            ax,
+            tr,
+            law_k,
+            f"{title}: {int(o.firings)} firings, Δv {float(o.dv_mps):.2f} m/s, "
+            f"miss {float(o.miss_m):.2f} m (error-free)",
+        )
+    axes[-1].set_xlabel("mission time (h)")
+    save(fig, "command_laws.png")
+
+    fig, ax = plt.subplots(figsize=(6.4, 6.0))
+    bt, br = runs["miss_t_m"][ok], runs["miss_r_m"][ok]
+    ax.scatter(bt, br, s=4, alpha=0.5, label=f"impacts ({ok.sum()})")
+    ax.plot(0, 0, "r+", ms=14, mew=2, label="target centre")
+    if ok.sum() > 2 and np.std(br) > 0:
+        cov = np.cov(np.stack([bt, br]))
+        for kk, style in ((1, "-"), (3, "--")):
+            xy = ellipse_xy(np.array([bt.mean(), br.mean()]), cov, kk)
+            ax.plot(xy[0], xy[1], "k" + style, lw=1, label=f"{kk}σ ellipse")
+    ax.set_xlabel("B·T (m)")
+    ax.set_ylabel("B·R (m)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_title(
+        f"{scenario.name}: B-plane misses (seed 004 Fig. 10)\n"
+        f"RMS {summary.get('miss_rms_m', np.nan):.1f} m, "
+        f"max {summary.get('miss_max_m', np.nan):.1f} m"
+    )
+    ax.legend(loc="upper right", fontsize=8)
+    ax.grid(alpha=0.3)
+    save(fig, "b_plane.png")
+
+    fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(14, 3.8))
+    a1.hist(runs["miss_m"][ok], bins=40, color="C2")
+    a1.set_xlabel("miss (m)")
+    a1.set_ylabel("runs")
+    a2.hist(runs["dv_mps"][ok], bins=40, color="C0")
+    a2.axvline(summary.get("dv_mean_mps", np.nan), color="k", ls="--", label="mean")
+    a2.set_xlabel("total Δv (m/s)")
+    a2.legend()
+    f = runs["firings"][ok].astype(int)
+    counts = np.bincount(f) if f.size else np.zeros(1)
+    a3.bar(np.arange(len(counts)), counts, color="C1")
+    a3.set_xlabel("firings (pulse trains)")
+    fig.suptitle(f"{scenario.name}: miss, Δv and firings ({ok.sum()} runs)")
+    save(fig, "dv_firings.png")
+    return files
+
+
+@register_system
+class InterceptSystem(AbstractSystem):
+    name = "intercept"
+    description = "deep-space intercept: augmented PN with Schmitt-triggered pulse firing"
+    sections = intercept_scenario.SCHEMA
+    law_family = AbstractInterceptGuidance
+    default_law = "apn"
+    tunable = (
+        "guidance.apn.n0",
+        "guidance.apn.k",
+        "guidance.apn.trigger_on",
+        "guidance.apn.trigger_off",
+    )
+    metrics = ("miss_rms_m", "miss_max_m", "dv_mean_mps", "firings_mean")
+    paper_labels: ClassVar[dict[str, str]] = {
+        "miss_rms_m": "miss RMS (m)",
+        "miss_max_m": "miss max (m)",
+        "miss_mean_m": "miss mean (m)",
+        "dv_mean_mps": "Δv mean (m/s)",
+        "dv_max_mps": "Δv max (m/s)",
+        "firings_max": "firings max",
+        "firings_mode": "firings mode",
+        "firings_mean": "firings (mean)",
+    }
+    example = "bennu-apn"
+    # the last 2 h of the approach: acquisition, pulse trains and the coast
+    test_overrides: ClassVar[dict[str, Any]] = {
+        "approach.impactor_position_km": [1.34176e8, 73440.0 + 0.0, 0.0],
+    }
+
+    def check(self, config):
+        intercept_scenario.check(config)
+
+    def build(self, scenario):
+        sim = intercept_sim.build(scenario)
+        return sim, self.build_law(scenario.config, sim.context)
+
+    def simulate(self, params, law, key, record=False):
+        return intercept_sim.simulate(params, law, key, record=record)
+
+    def smooth_objective(self, outcomes):
+        """Miss (softened at 1 m) plus 10 s x Δv, averaged over the runs."""
+        return jnp.mean(jnp.sqrt(outcomes.miss_m**2 + 1.0)) + 10.0 * jnp.mean(outcomes.dv_mps)
+
+    def statistics(self, outcomes, ok):
+        return _intercept_statistics(outcomes, ok)
+
+    def figures(self, summary, runs, scenario, out):
+        return intercept_figures(summary, runs, scenario, out)

@@ -1,0 +1,219 @@
+"""The midcourse system: autonomous B-plane targeting on an interplanetary transfer (seed 001).
+
+Truth propagation, navigation and execution errors are in :mod:`gnc_jax.simulation.midcourse`;
+the correction rule and its Newton targeter in :mod:`gnc_jax.guidance.targeting`; the scenario
+sections in :mod:`gnc_jax.scenario.midcourse`.
+"""
+
+import pathlib
+from typing import Any, ClassVar
+
+import jax.numpy as jnp
+import numpy as np
+
+from .._status import Status
+from ..plotting import pyplot, saver
+from ..scenario import midcourse as midcourse_scenario
+from ..simulation import midcourse as midcourse_sim
+from .base import AbstractSystem, register_system
+
+
+def _midcourse_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
+    if not ok.any():
+        return {}
+    rms = lambda x: float(np.sqrt(np.mean(x**2)))
+    b, tof = o["b_err_m"][ok] / 1e3, np.abs(o["tof_err_s"][ok])
+    b0, tof0 = o["b0_err_m"][ok] / 1e3, np.abs(o["tof0_err_s"][ok])
+    dv, count = o["dv_mps"][ok], o["corrections"][ok]
+    per_fix = o["dv_per_fix_mps"][ok]
+    later = per_fix[:, 1:][per_fix[:, 1:] > 0.0]
+    return dict(
+        b_err_km_rms=rms(b),
+        b_err_km_max=float(np.max(b)),
+        tof_err_s_rms=rms(tof),
+        tof_err_s_max=float(np.max(tof)),
+        dv_mean_mps=float(np.mean(dv)),
+        corrections_mean=float(np.mean(count)),
+        goal_met=int(np.sum(o["goal_met"][ok])),
+        goal_met_pct=float(100.0 * np.mean(o["goal_met"][ok])),
+        b_err_r_km_std=float(np.std(o["b_err_r_m"][ok] / 1e3)),
+        b_err_t_km_std=float(np.std(o["b_err_t_m"][ok] / 1e3)),
+        tof_err_s_std=float(np.std(o["tof_err_s"][ok])),
+        b0_err_km_rms=rms(b0),
+        b0_err_km_max=float(np.max(b0)),
+        b0_err_r_km_std=float(np.std(o["b0_err_r_m"][ok] / 1e3)),
+        b0_err_t_km_std=float(np.std(o["b0_err_t_m"][ok] / 1e3)),
+        tof0_err_s_rms=rms(tof0),
+        dv_max_mps=float(np.max(dv)),
+        dv_first_mean_mps=float(np.mean(o["dv_first_mps"][ok])),
+        dv_ref_mean_mps=float(np.mean(o["dv_ref_mps"][ok])),
+        dv_increase_pct_mean=float(np.mean(o["dv_increase_pct"][ok])),
+        later_dv_max_mps=float(np.max(later)) if later.size else 0.0,
+        later_dv_below_0p2_pct=float(100.0 * np.mean(later < 0.2)) if later.size else 0.0,
+        corrections_max=int(np.max(count)),
+        correction_every_fix_pct=float(100.0 * np.mean(count == per_fix.shape[1])),
+        iterations_mean=float(np.mean(o["iterations"][ok][count > 0])) if np.any(count) else 0.0,
+        ground_calls_total=int(np.sum(o["ground_calls"][ok])),
+    )
+
+
+def midcourse_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib.Path]:
+    """B-plane dispersion, seed 001 Figs. 1-4 and where the sensitivity methods depart."""
+    plt = pyplot()
+    ok = runs["status"] == Status.ok
+    files = []
+
+    save = saver(plt, out, files)
+
+    goal_km = scenario.config["goal"]["b_km"]
+    fig, axes = plt.subplots(1, 2, figsize=(11, 5))
+    for ax, prefix, title in ((axes[0], "b0", "before correction"), (axes[1], "b", "after")):
+        bt, br = runs[f"{prefix}_err_t_m"][ok] / 1e3, runs[f"{prefix}_err_r_m"][ok] / 1e3
+        ax.scatter(bt, br, s=6, alpha=0.6, label=f"runs ({ok.sum()})")
+        goal = plt.Circle((0, 0), goal_km, fill=False, color="r", label=f"goal {goal_km:g} km")
+        ax.add_patch(goal)
+        rms = np.sqrt(np.mean(bt**2 + br**2)) if bt.size else np.nan
+        ax.set_title(f"{title}: |ΔB| RMS {rms:.4g} km")
+        ax.set_xlabel("ΔB_T (km)")
+        ax.set_ylabel("ΔB_R (km)")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.grid(alpha=0.3)
+        ax.legend(loc="upper right", fontsize=8)
+    fig.suptitle(f"{scenario.name}: B-plane dispersion at Mars")
+    save(fig, "b_plane_dispersion.png")
+
+    # Seed 001 Fig. 1: partials against the central-difference step, autodiff as reference.
+    sim, law = MidcourseSystem().build(scenario)
+    rows = ("B_R (m per m/s)", "B_T (m per m/s)", "t_TOF (s per m/s)")
+    wrt = ("∂/∂v_x", "∂/∂v_y", "∂/∂v_z")
+    eps = np.logspace(-6, 2, 33)
+    k_cd, k_ad = (np.asarray(k) for k in midcourse_sim.partials_vs_step(sim, jnp.asarray(eps)))
+    scale = np.abs(k_ad).max(axis=1)
+    fig, axes = plt.subplots(2, 3, figsize=(14, 7), sharex=True)
+    for i in range(3):
+        for j in range(3):
+            axes[0, i].semilogx(eps, k_cd[:, i, j], f"C{j}.-", label=f"central diff. {wrt[j]}")
+            axes[0, i].axhline(k_ad[i, j], color=f"C{j}", ls="--", lw=1, label=f"autodiff {wrt[j]}")
+            departure = np.abs(k_cd[:, i, j] - k_ad[i, j]) / scale[i]
+            axes[1, i].loglog(eps, np.maximum(departure, 1e-17), f"C{j}.-", label=wrt[j])
+        axes[1, i].axhline(1e-6, color="k", ls=":", lw=1, label="1e-6")
+        axes[0, i].set_title(rows[i])
+        axes[1, i].set_xlabel("perturbation step ε (m/s)")
+        axes[0, i].grid(alpha=0.3)
+        axes[1, i].grid(alpha=0.3)
+    axes[0, 0].set_ylabel("partial derivative")
+    axes[1, 0].set_ylabel("|K_cd - K_autodiff| / max|row|")
+    axes[0, 0].legend(fontsize=6)
+    axes[1, 0].legend(fontsize=7)
+    fig.suptitle("Partials vs step ε at the first fix (seed 001 Fig. 1); dashed: autodiff")
+    save(fig, "partials_vs_epsilon.png")
+
+    # Seed 001 Figs. 2-3 along the nominal, and the departures from autodiff.
+    t_enc, t_fix = float(sim.t_encounter_s), float(sim.t_first_fix_s)
+    span_days = (t_enc - t_fix) / 86400.0
+    days = np.concatenate([np.linspace(span_days, 10.0, 20), np.geomspace(8.0, 1.1, 8)])
+    eps_g = float(law.targeter.epsilon)
+    sweep = midcourse_sim.partials_vs_time(
+        sim, jnp.asarray(t_enc - days * 86400.0), eps_g, t_enc - 86400.0
+    )
+    ks = {method: np.asarray(k) for method, k in sweep.items()}
+    methods = (
+        ("central_difference", f"central difference, ε = {eps_g:g} m/s (Fig. 2)"),
+        ("stm", "state-transition matrix (Fig. 3)"),
+    )
+    fig, axes = plt.subplots(3, 2, figsize=(12, 10), sharex=True)
+    for c, (method, title) in enumerate(methods):
+        for i in range(3):
+            for j in range(3):
+                axes[i, c].plot(days, ks[method][:, i, j], f"C{j}.-", label=wrt[j])
+                axes[i, c].plot(days, ks["autodiff"][:, i, j], f"C{j}--", lw=0.8)
+            axes[i, c].set_ylabel(rows[i])
+            axes[i, c].grid(alpha=0.3)
+        axes[0, c].set_title(title)
+        axes[2, c].set_xlabel("days to encounter")
+    axes[2, 0].invert_xaxis()  # shared x: flips both columns
+    axes[0, 0].legend(fontsize=8)
+    fig.suptitle("Partials vs time to encounter along the nominal (dashed: autodiff)")
+    save(fig, "partials_vs_time.png")
+
+    fig, ax = plt.subplots(figsize=(9, 5))
+    row_scale = np.abs(ks["autodiff"]).max(axis=2, keepdims=True)
+    for method, label in (
+        ("central_difference", f"central difference, ε = {eps_g:g} m/s"),
+        ("stm", "STM to the periapsis epoch (gnc_jax targeter)"),
+        ("stm_fixed_epoch", "STM to a fixed end epoch E-1 d, two-body Q there (paper)"),
+    ):
+        departure = (np.abs(ks[method] - ks["autodiff"]) / row_scale).max(axis=(1, 2))
+        ax.semilogy(days, np.maximum(departure, 1e-17), ".-", label=label)
+    ax.invert_xaxis()
+    ax.set_xlabel("days to encounter")
+    ax.set_ylabel("max |K - K_autodiff| / max|row|")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    ax.set_title("Departure of the sensitivity methods from autodiff along the nominal")
+    save(fig, "sensitivity_departure.png")
+
+    # Seed 001 Fig. 4: Δv per correction.
+    columns = [c for c in runs if c.startswith("dv_per_fix_mps_")]
+    columns.sort(key=lambda c: int(c.rsplit("_", 1)[1]))
+    per_fix = np.stack([runs[c] for c in columns], axis=1)
+    fix_epochs = t_fix + float(sim.fix_interval_s) * np.arange(per_fix.shape[1])
+    fix_days = (t_enc - fix_epochs) / 86400.0
+    width = 0.8 * float(sim.fix_interval_s) / 86400.0 if per_fix.shape[1] > 1 else 5.0
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    ax.bar(fix_days, per_fix[0], width=width, color="C0", alpha=0.7, label="run 0")
+    if ok.sum() > 1:
+        ax.plot(fix_days, per_fix[ok].mean(axis=0), "C3o-", ms=3, label=f"mean, {ok.sum()} runs")
+    if np.any(per_fix[0] > 0):
+        ax.set_yscale("log")
+    ax.invert_xaxis()
+    ax.set_xlabel("days to encounter")
+    ax.set_ylabel("Δv per correction (m/s)")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    total = summary.get("dv_mean_mps", np.nan)
+    ax.set_title(f"{scenario.name}: Δv per correction (seed 001 Fig. 4); total {total:.4g} m/s")
+    save(fig, "dv_per_fix.png")
+    return files
+
+
+@register_system
+class MidcourseSystem(AbstractSystem):
+    name = "midcourse"
+    description = "interplanetary midcourse correction by autonomous B-plane targeting"
+    sections = midcourse_scenario.SCHEMA
+    metrics = ("b_err_km_rms", "tof_err_s_rms", "dv_mean_mps", "goal_met_pct")
+    paper_labels: ClassVar[dict[str, str]] = {
+        "b_err_km_rms": "|ΔB| RMS (km)",
+        "b_err_km_max": "|ΔB| max (km)",
+        "tof_err_s_rms": "|Δt_TOF| RMS (s)",
+        "tof_err_s_max": "|Δt_TOF| max (s)",
+        "goal_met_pct": "goal met (% runs)",
+        "corrections_mean": "corrections mean",
+        "dv_increase_pct_mean": "Δv increase (%)",
+        "dv_first_mean_mps": "first Δv (m/s)",
+        "dv_mean_mps": "Δv mean (m/s)",
+        "later_dv_below_0p2_pct": "later Δv < 0.2 m/s (%)",
+        "correction_every_fix_pct": "burn every fix (% runs)",
+        "iterations_mean": "Newton iterations mean",
+        "b0_err_km_rms": "|ΔB| no guidance RMS (km)",
+        "b0_err_r_km_std": "ΔB_R no guidance 1σ (km)",
+        "b0_err_t_km_std": "ΔB_T no guidance 1σ (km)",
+    }
+    example = "phoenix-midcourse"
+    test_overrides: ClassVar[dict[str, Any]] = {}
+
+    def check(self, config):
+        midcourse_scenario.check(config)
+
+    def build(self, scenario):
+        return midcourse_sim.build(scenario)
+
+    def simulate(self, params, law, key, record=False):
+        return midcourse_sim.simulate(params, law, key, record=record)
+
+    def statistics(self, outcomes, ok):
+        return _midcourse_statistics(outcomes, ok)
+
+    def figures(self, summary, runs, scenario, out):
+        return midcourse_figures(summary, runs, scenario, out)

@@ -1,0 +1,188 @@
+"""Family tests: every registered system and every law of its family, by being registered.
+
+Like diffrax's ``all_ode_solvers``: the cases are read from the registry at collection time, so
+a new system (built-in or a user's, e.g. ``tests/toy_system.py``) or a new law registered into
+a family is tested here without new test code. Each case runs the system's ``example`` scenario
+with its ``test_overrides`` (a cheap version of the same code paths).
+"""
+
+import json
+import os
+import pathlib
+import subprocess
+import sys
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import gnc_jax as gj
+from gnc_jax import montecarlo
+from gnc_jax.params import declared_params, file_name, schema_of
+from gnc_jax.systems import tunable_leaf
+
+CASES = [
+    pytest.param(name, law, id=f"{name}-{law}" if law else name)
+    for name, system in gj.systems().items()
+    for law in (list(system.laws()) or [None])
+]
+
+
+def example(name, law=None):
+    system = gj.get_system(name)
+    overrides = dict(system.test_overrides)
+    if law is not None:
+        overrides["guidance.law"] = law
+    return gj.load_scenario(system.example, overrides=overrides)
+
+
+def tunables(name, law):
+    return [
+        t for t in gj.get_system(name).tunable if law is None or t.startswith(f"guidance.{law}.")
+    ]
+
+
+def assert_outcomes_equal(a: dict, b: dict, rows=slice(None)):
+    assert a.keys() == b.keys()
+    for field in a:
+        x, y = np.asarray(a[field])[rows], np.asarray(b[field])
+        if np.issubdtype(x.dtype, np.floating):
+            np.testing.assert_allclose(x, y, rtol=1e-9, atol=1e-9, err_msg=field)
+        else:
+            np.testing.assert_array_equal(x, y, err_msg=field)
+
+
+@pytest.mark.parametrize("name, law", CASES)
+def test_batch_equals_per_run_loop_and_chunking(name, law):
+    scenario = example(name, law)
+    whole = gj.run_study(scenario, runs=4, seed=7, progress=False)
+    chunked = gj.run_study(scenario, runs=4, seed=7, chunk_size=2, progress=False)
+    assert whole.summary()["failed"] == 0, whole.summary()["failed_by_status"]
+    assert_outcomes_equal(whole.outcomes, chunked.outcomes)
+    for i in range(4):
+        one, _ = gj.simulate_one(scenario, index=i, seed=7, record=False)
+        assert_outcomes_equal(whole.outcomes, one._asdict(), rows=i)
+
+
+@pytest.mark.parametrize("name, law", CASES)
+def test_a_failed_run_is_counted_and_left_out(name, law, monkeypatch):
+    """A run whose outcome is not finite gets the ``nan`` status, is counted in ``failed`` and
+    is left out of the statistics, whatever the system."""
+    system = gj.get_system(name)
+
+    class Poisoned(type(system)):
+        def simulate(self, params, law, key, record=False):
+            out, trace = super().simulate(params, law, key, record)
+            bad = jax.random.uniform(jax.random.fold_in(key, 987654)) < 0.5
+            field = next(
+                f for f in out._fields[1:] if jnp.issubdtype(getattr(out, f).dtype, jnp.floating)
+            )
+            value = getattr(out, field)
+            return out._replace(**{field: jnp.where(bad, jnp.nan, value)}), trace
+
+    poisoned = Poisoned()
+    monkeypatch.setattr(montecarlo, "get_system", lambda kind: poisoned)
+    study = gj.run_study(example(name, law), runs=8, seed=3, progress=False)
+    bad = np.array(
+        [
+            float(jax.random.uniform(jax.random.fold_in(gj.run_key(3, i), 987654))) < 0.5
+            for i in range(8)
+        ]
+    )
+    assert 0 < bad.sum() < 8
+    np.testing.assert_array_equal(study.status == gj.Status.nan, bad)
+    summary = study.summary()
+    assert summary["failed"] == int(bad.sum())
+    assert summary["failed_by_status"] == {"nan": int(bad.sum())}
+    for key, value in summary.items():
+        if isinstance(value, float):
+            assert np.isfinite(value), key
+
+
+@pytest.mark.parametrize("name, law", CASES)
+def test_gradient_of_a_tunable_leaf_matches_central_differences(name, law):
+    system = gj.get_system(name)
+    leaves = tunables(name, law)
+    if not leaves:
+        pytest.skip(f"{name}/{law}: no tunable leaves")
+    params, hard_law = gj.build(example(name, law))
+    relaxed = hard_law.relax(temperature=0.1)  # a smooth switch: differences resolve it
+    _, attribute = tunable_leaf(system, leaves[0])
+    if type(system).smooth_objective is gj.AbstractSystem.smooth_objective:
+        pytest.skip(f"{name}: no smooth objective")
+
+    @jax.jit
+    def objective(value):
+        tuned = eqx.tree_at(lambda l: getattr(l, attribute), relaxed, value)
+        keys = jax.vmap(lambda i: gj.run_key(1, i))(jnp.arange(2))
+        out = jax.vmap(lambda k: system.simulate(params, tuned, k)[0])(keys)
+        return system.smooth_objective(out)
+
+    x = jnp.asarray(getattr(hard_law, attribute), dtype=jnp.float64)
+    grad = float(jax.jit(jax.grad(objective))(x))
+    h = 1e-4 * max(1.0, abs(float(x)))
+    fd = float((objective(x + h) - objective(x - h)) / (2 * h))
+    assert np.isfinite(grad)
+    assert abs(fd) > 0.0, "the objective does not depend on the leaf"
+    np.testing.assert_allclose(grad, fd, rtol=5e-3)
+
+
+@pytest.mark.parametrize("name, law", CASES)
+def test_new_gain_values_reuse_the_compiled_study(name, law):
+    leaves = tunables(name, law)
+    if not leaves:
+        pytest.skip(f"{name}/{law}: no tunable leaves")
+    scenario = example(name, law)
+    value = scenario[leaves[0]]
+    a = gj.run_study(scenario, runs=2, seed=0, progress=False)
+    b = gj.run_study(
+        scenario.with_overrides({leaves[0]: value * 0.8}), runs=2, seed=0, progress=False
+    )
+    assert b.compile_s == 0.0  # gains are arguments of the executable, not constants
+    assert not all(np.array_equal(a.outcomes[f], b.outcomes[f]) for f in a.outcomes)
+
+
+@pytest.mark.parametrize("name, law", [c for c in CASES if c.values[1] is not None])
+def test_law_parameters_are_declared_once(name, law):
+    """The [guidance.<law>] table is the law's declared fields, and building the law from the
+    table's defaults gives the law's own defaults (except fields whose SI value depends on
+    other sections, e.g. trigger thresholds in units of the engine's impulse bit)."""
+    system = gj.get_system(name)
+    cls = system.laws()[law]
+    assert system.schema()[f"guidance.{law}"] == schema_of(cls)
+    specs = declared_params(cls)
+    table = {file_name(a, s): s.field.default for a, s in specs.items()}
+    built, default = cls.from_config(table, example(name, law).config), cls()
+    for attribute, spec in specs.items():
+        if not spec.derived:
+            np.testing.assert_array_equal(getattr(built, attribute), getattr(default, attribute))
+
+
+def test_a_system_registered_outside_the_package_runs_from_the_command_line(tmp_path):
+    """``gnc-jax run`` / ``report`` on the toy system of tests/toy_system.py, registered from
+    outside ``gnc_jax/`` through the plugin variable, in a fresh process."""
+    tests_dir = pathlib.Path(__file__).parent
+    env = {**os.environ, "GNC_JAX_PLUGINS": "toy_system", "GNC_JAX_HOST_DEVICES": "1"}
+    env["PYTHONPATH"] = os.pathsep.join([str(tests_dir), env.get("PYTHONPATH", "")])
+    out = tmp_path / "toy"
+    run = [sys.executable, "-m", "gnc_jax", "run", str(tests_dir / "toy.toml"), "--runs", "50"]
+    done = subprocess.run(run + ["--out", str(out)], env=env, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["kind"] == "toy-intercept" and summary["runs"] == 50
+    assert summary["failed"] == 0 and summary["miss_rms_m"] < 20.0
+    report = subprocess.run(
+        [sys.executable, "-m", "gnc_jax", "report", str(out)], env=env, capture_output=True
+    )
+    assert report.returncode == 0, report.stderr
+    assert (out / "miss.png").read_bytes()[:4] == b"\x89PNG"
+    # without the plugin the kind is unknown, in one line
+    env.pop("GNC_JAX_PLUGINS")
+    refused = subprocess.run(run, env=env, capture_output=True, text=True)
+    assert refused.returncode == 2
+    assert refused.stderr.strip() == (
+        "gnc-jax: error: scenario.kind: 'toy-intercept'; allowed: one of capsule, impactor, "
+        "intercept, midcourse"
+    )
