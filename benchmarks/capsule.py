@@ -29,7 +29,6 @@ from _timing import best_of, python_loop_rate, time_batch  # benchmarks/_timing.
 import gnc_jax as gj  # first: float64 and one XLA device per core
 from gnc_jax.dynamics.entry import EntryArgs, entry_vector_field
 from gnc_jax.integrate import rk4_step
-from gnc_jax.montecarlo import SYSTEMS
 from gnc_jax.simulation.capsule import dispersed_entry
 
 
@@ -69,8 +68,8 @@ def main():
     args = p.parse_args()
 
     scenario = gj.load_scenario(args.scenario)
-    system = SYSTEMS[scenario.kind]
-    sim, law = system.build(scenario)
+    system = scenario.system
+    sim, law = gj.build(scenario)
     truth_evals = 4 * sim.n_control * sim.substeps
     print(
         f"# {scenario.name}: {sim.n_control} control steps x {sim.substeps} truth RK4 steps "

@@ -22,13 +22,12 @@ import gnc_jax as gj  # first: float64, host devices
 from gnc_jax.dynamics.entry import EntryState
 from gnc_jax.guidance.entry_common import EntryModel
 from gnc_jax.integrate import RK4, RK6_BUTCHER, integrate_fixed
-from gnc_jax.simulation.capsule import build
 
 T_ARC = 800.0
 
 
 def main():
-    sim, law = build(gj.load_scenario("lunar-skip-entry"))
+    sim, law = gj.build(gj.load_scenario("lunar-skip-entry"))
     model = EntryModel(sim.vehicle, sim.earth, sim.atmosphere)
     cos_b = jnp.cos(law.reference.first_entry_bank_rad)
     from gnc_jax.dynamics.entry import entry_state_from_conditions

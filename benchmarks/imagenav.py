@@ -21,7 +21,6 @@ from _timing import best_of  # benchmarks/_timing.py
 import gnc_jax as gj  # first: float64 and one XLA device per core
 from gnc_jax.navigation.centroid import extract_centroid
 from gnc_jax.navigation.render import choose_binning, render_frame, roi_to_tangent
-from gnc_jax.simulation.impactor import build
 
 
 def main():
@@ -33,7 +32,7 @@ def main():
     args = p.parse_args()
 
     scenario = gj.load_scenario("autonav-predictive")
-    sim, _ = build(scenario)
+    sim, _ = gj.build(scenario)
     cam, tgt = sim.camera, sim.target
 
     def frame(key):

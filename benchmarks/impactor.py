@@ -14,7 +14,6 @@ import jax
 from _timing import python_loop_rate, time_batch  # benchmarks/_timing.py
 
 import gnc_jax as gj  # first: float64 and one XLA device per core
-from gnc_jax.montecarlo import SYSTEMS
 
 
 def main():
@@ -26,8 +25,8 @@ def main():
     args = p.parse_args()
 
     scenario = gj.load_scenario(args.scenario)
-    system = SYSTEMS[scenario.kind]
-    sim, law = system.build(scenario)
+    system = scenario.system
+    sim, law = gj.build(scenario)
     print(
         f"# {scenario.name}: {sim.n_images * sim.steps_per_image} control steps per run; "
         f"{len(jax.devices())} XLA host devices; jax {jax.__version__}"

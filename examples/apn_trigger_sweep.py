@@ -32,7 +32,11 @@ def sweep():
         row = {"rho": on / TRIGGER_OFF, "trigger_on": on}
         for law, name in LAWS.items():
             scenario = gj.load_scenario(
-                name, overrides=[f"guidance.trigger_on={on}", f"guidance.trigger_off={TRIGGER_OFF}"]
+                name,
+                overrides=[
+                    f"guidance.apn.trigger_on={on}",
+                    f"guidance.apn.trigger_off={TRIGGER_OFF}",
+                ],
             )
             out, _ = gj.simulate_one(scenario, record=False)
             est = estimate_pulse_trains(scenario)

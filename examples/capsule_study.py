@@ -9,7 +9,6 @@ import jax.numpy as jnp
 import numpy as np
 
 import gnc_jax as gj  # import first: float64 and one XLA device per core
-from gnc_jax.simulation.capsule import build, simulate
 
 # 1. The packaged seed 003 scenario: 1000 dispersed runs, saved and plotted (Figs. 4-6).
 scenario = gj.load_scenario("lunar-skip-entry")
@@ -35,13 +34,13 @@ for k_range in (1.5, 2.0, 2.5, 3.0):
 
 # 3. Sensitivity of the chute downrange error to the four tracking gains, forward mode
 #    through the whole closed loop (the predictor's while loops rule out reverse mode).
-sim, law = build(scenario)
+sim, law = gj.build(scenario)
 names = ("k_range", "k_drag_load", "k_hdot", "k_range_rate")
 
 
 def downrange(gains, i):
     tuned = eqx.tree_at(lambda l: tuple(getattr(l, n) for n in names), law, tuple(gains))
-    return simulate(sim, tuned, gj.run_key(0, i))[0].downrange_err_km
+    return scenario.system.simulate(sim, tuned, gj.run_key(0, i))[0].downrange_err_km
 
 
 gains = jnp.stack([getattr(law, n) for n in names])

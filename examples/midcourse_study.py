@@ -41,7 +41,7 @@ for pct in (0.0, 1.0, 3.0, 5.0, 10.0):
 
 # 3. d(B_R, B_T, t_arrival) / d(C_r A/m) of the nominal transfer: the aim-point shift per unit
 #    of area-to-mass uncertainty, exact, in one forward-mode pass through diffrax.
-sim, _ = midcourse.build(gj.load_scenario("phoenix-midcourse"))
+sim, _ = gj.build(gj.load_scenario("phoenix-midcourse"))
 x0 = jnp.concatenate([sim.r0_m, sim.v0_mps])
 
 
