@@ -10,7 +10,8 @@ Typical use::
     gj.report("results/los")
 
 Importing gnc_jax turns on float64 and splits the CPU into one XLA device per core
-(``GNC_JAX_HOST_DEVICES`` overrides the count); import it before anything touches JAX.
+(``GNC_JAX_HOST_DEVICES`` overrides the count, ``GNC_JAX_ENABLE_X64=0`` leaves JAX's precision
+alone; see ``gnc_jax._config``); import it before anything runs a JAX computation.
 """
 
 from . import _config  # noqa: F401  (float64, host devices: must run before jax is used)

@@ -1,13 +1,19 @@
-"""Process-wide JAX configuration: float64 everywhere and one XLA host device per core.
+"""Process-wide JAX configuration: float64 and one XLA host device per core.
 
-XLA runs a CPU computation on one core per device, so a batch is split over as many host
-devices as there are cores. The device count must be set before JAX initialises its backend;
-this module does that when `gnc_jax` is imported first. Set ``GNC_JAX_HOST_DEVICES`` to
-override the count (``1`` disables the split), or set ``XLA_FLAGS`` yourself.
+Set when ``gnc_jax`` is imported, through public settings only, and overridable:
+
+* **float64** (``jax_enable_x64``): every gnc_jax computation needs it (7e7 m ranges with
+  metre-level misses). ``GNC_JAX_ENABLE_X64=0`` leaves JAX's setting alone (at your own risk;
+  the test suite assumes float64).
+* **host devices**: XLA runs a CPU computation on one core per device, so a batch is split over
+  as many host devices as there are cores (``--xla_force_host_platform_device_count`` in
+  ``XLA_FLAGS``). ``GNC_JAX_HOST_DEVICES=n`` chooses the count (``1`` disables the split); an
+  ``XLA_FLAGS`` that already names the flag is left as it is. The flag only takes effect if
+  JAX's backend has not started yet, so import ``gnc_jax`` before anything runs a JAX
+  computation; otherwise the study runs on the devices JAX already has.
 """
 
 import os
-import sys
 
 _FLAG = "--xla_force_host_platform_device_count"
 
@@ -16,20 +22,13 @@ def _configure_host_devices() -> None:
     flags = os.environ.get("XLA_FLAGS", "")
     if _FLAG in flags:
         return
-    if "jax" in sys.modules:
-        try:  # backend already up: too late to change the device count
-            import jax._src.xla_bridge as xb
-
-            if xb.backends_are_initialized():
-                return
-        except Exception:
-            return
     n = int(os.environ.get("GNC_JAX_HOST_DEVICES", os.cpu_count() or 1))
     os.environ["XLA_FLAGS"] = f"{flags} {_FLAG}={max(n, 1)}".strip()
 
 
 _configure_host_devices()
 
-import jax  # noqa: E402
+import jax  # noqa: E402  (after XLA_FLAGS: the backend reads them when it starts)
 
-jax.config.update("jax_enable_x64", True)
+if os.environ.get("GNC_JAX_ENABLE_X64", "1") != "0":
+    jax.config.update("jax_enable_x64", True)

@@ -5,6 +5,8 @@ A run that is not ``ok`` is counted and flagged in the results and left out of t
 
 import enum
 
+import jax.numpy as jnp
+
 
 class Status(enum.IntEnum):
     ok = 0
@@ -21,6 +23,5 @@ class Status(enum.IntEnum):
 def all_finite(outcome):
     """True when every field of an outcome NamedTuple after ``status`` (its first field) is
     finite: the check behind ``Status.nan``, shared by every simulator."""
-    import jax.numpy as jnp
 
     return jnp.all(jnp.array([jnp.all(jnp.isfinite(jnp.asarray(x))) for x in outcome[1:]]))

@@ -3,6 +3,9 @@
 Every command is one or two calls of the Python API (``gnc_jax.load_scenario``,
 ``gnc_jax.run_study``, ``Study.save``, ``gnc_jax.reproduce``, ``gnc_jax.report``). Bad input
 stops before anything is compiled, with one line naming the field and the allowed values.
+
+The commands import the package inside their functions, on purpose: ``--help`` and argument
+errors answer at once, without starting JAX, and JAX is configured by ``gnc_jax`` before use.
 """
 
 import argparse

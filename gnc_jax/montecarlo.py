@@ -17,8 +17,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, PartitionSpec
+from tqdm.auto import tqdm
 
 from ._status import Status
+from .results import save_study, summarize
 from .scenario import Scenario, ScenarioError
 from .systems.base import AbstractSystem, get_system
 
@@ -109,13 +111,9 @@ class Study:
         return self.status == Status.ok
 
     def summary(self) -> dict[str, Any]:
-        from .results import summarize
-
         return summarize(self)
 
     def save(self, out_dir) -> dict[str, str]:
-        from .results import save_study
-
         return save_study(self, out_dir)
 
 
@@ -170,8 +168,6 @@ def run_study(
     show = progress if progress is not None else (n_chunks > 1 and sys.stderr.isatty())
     bar = None
     if show:
-        from tqdm.auto import tqdm
-
         bar = tqdm(total=runs, desc=scenario.name, unit="run", disable=not show)
     parts = []
     t0 = time.perf_counter()

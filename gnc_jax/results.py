@@ -10,15 +10,17 @@ import pathlib
 import platform
 from typing import Any
 
+import jax
 import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
 
 from ._status import Status
+from .scenario import load_scenario
 from .systems.base import get_system
 
 
 def _machine_note(study) -> str:
-    import jax
-
     return (
         f"{platform.machine()} {os.cpu_count()} cores, {study.n_devices} XLA host devices, "
         f"jax {jax.__version__}, {platform.python_implementation()} "
@@ -56,8 +58,6 @@ def summarize(study) -> dict[str, Any]:
 
 def runs_table(study):
     """One row per run: index, status, outcomes and dispersion draws (vectors split in columns)."""
-    import pyarrow as pa
-
     cols: dict[str, Any] = {"run": np.arange(study.runs)}
     status = study.outcomes["status"]
     cols["status"] = status
@@ -76,8 +76,6 @@ def runs_table(study):
 
 def save_study(study, out_dir) -> dict[str, str]:
     """Write ``summary.json``, ``runs.parquet`` and ``scenario.toml`` into ``out_dir``."""
-    import pyarrow.parquet as pq
-
     out = pathlib.Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {
@@ -93,10 +91,6 @@ def save_study(study, out_dir) -> dict[str, str]:
 
 def load_results(out_dir) -> tuple[dict, "Any", "Any"]:
     """Read back ``(summary, runs table as a dict of numpy arrays, scenario)`` from a run dir."""
-    import pyarrow.parquet as pq
-
-    from .scenario import load_scenario
-
     out = pathlib.Path(out_dir)
     for name in ("summary.json", "runs.parquet", "scenario.toml"):
         if not (out / name).is_file():

@@ -12,6 +12,8 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from .._types import Array, Float, Scalar, Vector3
+from ..geometry.bplane import b_plane_crossing
+from ..integrate import integrate_fixed
 
 G0 = 9.80665  # standard gravity, m/s^2 (Isp and accelerometer "g" units)
 
@@ -93,7 +95,6 @@ def propagate(
     Without differential gravity the solution is a polynomial of degree 2 in time for constant
     thrust and mass, which RK4 integrates exactly with any step.
     """
-    from ..integrate import integrate_fixed
 
     args = (dynamics, thrust_vector_n, mass_flow)
     return integrate_fixed(vector_field, 0.0, y, duration_s / n_steps, n_steps, args)
@@ -107,7 +108,6 @@ def coast_to_b_plane(
     Propagates for the linearised time of flight with RK4, then closes the remaining (small)
     gap to the plane along a straight line.
     """
-    from ..geometry.bplane import b_plane_crossing
 
     _, t_tof = b_plane_crossing(y.r, y.v, c_bi)
     y_end = propagate(dynamics, y, jnp.zeros(3), 0.0, t_tof, n_steps)

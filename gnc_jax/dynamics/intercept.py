@@ -25,6 +25,8 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from .._types import Scalar, Vector3
+from ..geometry.bplane import b_plane_crossing
+from ..integrate import integrate_fixed
 
 MU_SUN = 1.32715e20
 """Solar gravitational parameter used by seed 004 (eq. 1), m^3/s^2."""
@@ -97,8 +99,6 @@ def propagate(
     n_steps: int,
 ) -> InterceptState:
     """Propagate over ``duration_s`` (may be traced) with ``n_steps`` fixed RK4 steps."""
-    from ..integrate import integrate_fixed
-
     args = (dynamics, thrust_vector_n, mass_flow)
     return integrate_fixed(vector_field, 0.0, y, duration_s / n_steps, n_steps, args)
 
@@ -109,7 +109,6 @@ def coast_to_b_plane(dynamics: InterceptDynamics, y: InterceptState, c_bi, n_ste
     Propagates the full dynamics for the straight-line time of flight with ``n_steps`` RK4
     steps, then closes the remaining (sub-millisecond) gap to the plane along a straight line.
     """
-    from ..geometry.bplane import b_plane_crossing
 
     _, t_tof = b_plane_crossing(y.r, y.v, c_bi)
     y_end = propagate(dynamics, y, jnp.zeros(3), 0.0, t_tof, n_steps)

@@ -7,6 +7,7 @@ B-plane frame.
 """
 
 import jax.numpy as jnp
+import numpy as np
 
 from .._types import Array, Float, Matrix3, Vector3
 
@@ -39,8 +40,6 @@ def b_plane_frame(v_inf: Vector3, ref_normal: Vector3) -> Matrix3:
 
 def check_b_plane_frame(v_inf, ref_normal) -> None:
     """Raise :class:`BPlaneError` when S is parallel to the reference normal (concrete inputs)."""
-    import numpy as np
-
     v = np.asarray(v_inf, dtype=float)
     h = np.asarray(ref_normal, dtype=float)
     if not np.all(np.isfinite(v)) or np.linalg.norm(v) == 0.0:

@@ -7,6 +7,8 @@ import pathlib
 import tomllib
 from typing import Any
 
+import tomli_w
+
 from ..systems.base import get_system
 from .schema import ScenarioError, parse_override
 
@@ -85,8 +87,6 @@ class Scenario:
         return {"scenario": self._meta(), **self.config, "paper": dict(self.paper)}
 
     def to_toml(self) -> str:
-        import tomli_w
-
         return tomli_w.dumps(self.to_dict())
 
 

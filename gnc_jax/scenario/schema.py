@@ -8,6 +8,7 @@ anything is compiled, and every error is one line naming the field and what is a
 import dataclasses
 import datetime
 import math
+import tomllib
 from typing import Any
 
 
@@ -179,7 +180,6 @@ def validate(config: dict, schema: Schema, where: str = "", optional=frozenset()
 def parse_override(text: str) -> tuple[str, str, Any]:
     """Parse ``section[.table].field=value`` into ``(section, field, value)`` (value in TOML
     syntax; a bare word is a string); ``section`` may be dotted (``guidance.los``)."""
-    import tomllib
 
     if "=" not in text:
         raise ScenarioError(f"--set {text}: expected section.field=value")
