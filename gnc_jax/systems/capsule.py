@@ -73,20 +73,9 @@ def _capsule_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, A
     return out
 
 
-def capsule_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib.Path]:
-    """Seed 003 Figs. 4-6 (predictions, altitude-range fan, chute scatter), bank histories and
-    the chute miss against the dispersed L/D."""
-    plt = pyplot()
-    files = []
-
-    save = saver(plt, out, files)
-
-    ok = runs["status"] == Status.ok
-    n_ok = int(ok.sum())
-    dr, cr = runs["downrange_err_km"][ok], runs["crossrange_err_km"][ok]
-    paper = scenario.paper
-
-    # Fig. 6: chute-deploy points with the 1-sigma and 3-sigma ellipses.
+def _chute_scatter(plt, summary, scenario, dr, cr):
+    """Seed 003 Fig. 6: chute-deploy points with the 1-sigma and 3-sigma ellipses."""
+    paper, n_ok = scenario.paper, len(dr)
     fig, ax = plt.subplots(figsize=(6.4, 6.0))
     ax.scatter(cr, dr, s=5, alpha=0.5, label=f"chute deploy ({n_ok} runs)")
     ax.plot(0, 0, "r+", ms=14, mew=2, label="target")
@@ -125,9 +114,12 @@ def capsule_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib.
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="upper right")
-    save(fig, "chute_scatter.png")
+    return fig
 
-    # Fig. 4: predictions per trajectory and the largest count in one guidance cycle.
+
+def _predictions(plt, runs, ok, scenario):
+    """Seed 003 Fig. 4: predictions per trajectory and the largest count in one cycle."""
+    paper = scenario.paper
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.8))
     a1.hist(runs["predictions"][ok], bins=40, color="C0")
     a1.axvline(np.mean(runs["predictions"][ok]), color="k", ls="--", label="mean (gnc_jax)")
@@ -141,9 +133,11 @@ def capsule_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib.
     a2.set_xlabel("most predictions in one corrector cycle")
     a2.set_ylabel("runs")
     fig.suptitle(f"{scenario.name}: predictor calls (seed 003 Fig. 4)")
-    save(fig, "predictions.png")
+    return fig
 
-    # Chute miss against the dispersed lift-to-drag ratio (where the tails come from).
+
+def _miss_against_ld(plt, runs, ok, scenario, dr, cr):
+    """Chute miss against the dispersed lift-to-drag ratio (where the tails come from)."""
     d = scenario.config["dispersions"]
     z = np.stack([runs[f"dispersion_{j}"] for j in range(10)], axis=1)[ok]
     ld = (1.0 + d["cl_pct"] / 300.0 * z[:, 6]) / (1.0 + d["cd_pct"] / 300.0 * z[:, 7])
@@ -155,11 +149,11 @@ def capsule_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib.
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     ax.set_title(f"{scenario.name}: chute miss against the dispersed L/D")
-    save(fig, "miss_vs_ld.png")
+    return fig
 
-    # Fig. 5: altitude against range flown for every run; bank histories of the first runs.
-    every = 5
-    _, tr = simulate_traces(scenario, np.flatnonzero(ok), seed=summary.get("seed"), every=every)
+
+def _altitude_range_fan(plt, tr, scenario):
+    """Seed 003 Fig. 5: altitude against range flown for every run."""
     live = tr["phase"] < 4
     fig, ax = plt.subplots(figsize=(10, 4.5))
     for i in range(len(tr["t_s"])):
@@ -173,8 +167,11 @@ def capsule_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib.
     )
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    save(fig, "altitude_range_fan.png")
+    return fig
 
+
+def _bank_histories(plt, tr, scenario):
+    live = tr["phase"] < 4
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
     for i in range(min(20, len(tr["t_s"]))):
         m = live[i]
@@ -186,7 +183,23 @@ def capsule_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib.
     a1.grid(alpha=0.3)
     a2.grid(alpha=0.3)
     fig.suptitle(f"{scenario.name}: bank angle and load, first {min(20, len(tr['t_s']))} runs")
-    save(fig, "bank_histories.png")
+    return fig
+
+
+def capsule_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib.Path]:
+    """Seed 003 Figs. 4-6 (predictions, altitude-range fan, chute scatter), bank histories and
+    the chute miss against the dispersed L/D."""
+    plt = pyplot()
+    files = []
+    save = saver(plt, out, files)
+    ok = runs["status"] == Status.ok
+    dr, cr = runs["downrange_err_km"][ok], runs["crossrange_err_km"][ok]
+    save(_chute_scatter(plt, summary, scenario, dr, cr), "chute_scatter.png")
+    save(_predictions(plt, runs, ok, scenario), "predictions.png")
+    save(_miss_against_ld(plt, runs, ok, scenario, dr, cr), "miss_vs_ld.png")
+    _, tr = simulate_traces(scenario, np.flatnonzero(ok), seed=summary.get("seed"), every=5)
+    save(_altitude_range_fan(plt, tr, scenario), "altitude_range_fan.png")
+    save(_bank_histories(plt, tr, scenario), "bank_histories.png")
     return files
 
 

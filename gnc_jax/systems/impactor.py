@@ -21,7 +21,7 @@ from ..montecarlo import simulate_one
 from ..navigation.camera import camera_attitude, los_angles
 from ..navigation.centroid import extract_centroid
 from ..navigation.render import choose_binning, phase_offset_tangent, render_frame, tangent_to_roi
-from ..plotting import ellipse_xy, pyplot
+from ..plotting import ellipse_xy, pyplot, saver
 from ..scenario import impactor as impactor_scenario
 from ..simulation import impactor as impactor_sim
 from .base import AbstractSystem, register_system
@@ -64,12 +64,8 @@ def _impactor_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, 
     return out
 
 
-def impactor_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib.Path]:
-    """B-plane impact points with 1σ/3σ ellipses, Δv and firings, run 0's engine trace
-    (seed 000 Fig. 3 for the LOS law) and rendered frames (seed 002 Fig. 7)."""
-    plt = pyplot()
-    ok = runs["status"] == Status.ok
-    files = []
+def _b_plane_points(plt, summary, runs, ok, scenario):
+    """Impact points in the B-plane with their 1σ and 3σ ellipses (seed 000 eq. 17)."""
     aim = np.array(scenario.config["guidance"]["aim_final_km"]) * 1e3
     b = np.stack([runs["b_t_m"][ok], runs["b_r_m"][ok]], axis=1)
 
@@ -93,10 +89,10 @@ def impactor_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib
     )
     ax.legend(loc="upper right", fontsize=8)
     ax.grid(alpha=0.3)
-    files.append(out / "b_plane.png")
-    fig.savefig(files[-1], dpi=120, bbox_inches="tight")
-    plt.close(fig)
+    return fig
 
+
+def _dv_and_firings(plt, summary, runs, ok, scenario):
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.8))
     a1.hist(runs["dv_mps"][ok], bins=40, color="C0")
     a1.axvline(summary.get("dv_mean_mps", np.nan), color="k", ls="--", label="mean")
@@ -109,12 +105,11 @@ def impactor_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib
     a2.set_xlabel("engine firings")
     a2.set_ylabel("runs")
     fig.suptitle(f"{scenario.name}: Δv and firings ({ok.sum()} runs)")
-    files.append(out / "dv_firings.png")
-    fig.savefig(files[-1], dpi=120, bbox_inches="tight")
-    plt.close(fig)
+    return fig
 
-    # Fig. 3 of seed 000 for the first run: |omega| against the switching curves.
-    _, trace = simulate_one(scenario, index=0, seed=summary.get("seed"))
+
+def _engine_trace(plt, trace, scenario):
+    """Seed 000 Fig. 3 for run 0 (a switching-curve law: |omega| against its curves)."""
     t = trace.t_s
     fig, ax = plt.subplots(figsize=(9, 4.5))
     ls = trace.law_state
@@ -140,9 +135,20 @@ def impactor_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib
     ax.legend(h1 + h2, l1 + l2, loc="upper left", fontsize=8)
     ax.set_title(f"{scenario.name}: {title}")
     ax.grid(alpha=0.3)
-    files.append(out / "engine_trace.png")
-    fig.savefig(files[-1], dpi=120, bbox_inches="tight")
-    plt.close(fig)
+    return fig
+
+
+def impactor_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib.Path]:
+    """B-plane impact points with 1σ/3σ ellipses, Δv and firings, run 0's engine trace
+    (seed 000 Fig. 3 for the LOS law) and rendered frames (seed 002 Fig. 7)."""
+    plt = pyplot()
+    ok = runs["status"] == Status.ok
+    files = []
+    save = saver(plt, out, files)
+    save(_b_plane_points(plt, summary, runs, ok, scenario), "b_plane.png")
+    save(_dv_and_firings(plt, summary, runs, ok, scenario), "dv_firings.png")
+    _, trace = simulate_one(scenario, index=0, seed=summary.get("seed"))
+    save(_engine_trace(plt, trace, scenario), "engine_trace.png")
     files.append(_centroid_frames_figure(scenario, trace, out))
     return files
 

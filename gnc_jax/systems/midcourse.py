@@ -57,14 +57,11 @@ def _midcourse_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str,
     )
 
 
-def midcourse_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib.Path]:
-    """B-plane dispersion, seed 001 Figs. 1-4 and where the sensitivity methods depart."""
-    plt = pyplot()
-    ok = runs["status"] == Status.ok
-    files = []
+ROWS = ("B_R (m per m/s)", "B_T (m per m/s)", "t_TOF (s per m/s)")
+WRT = ("∂/∂v_x", "∂/∂v_y", "∂/∂v_z")
 
-    save = saver(plt, out, files)
 
+def _b_plane_dispersion(plt, runs, ok, scenario):
     goal_km = scenario.config["goal"]["b_km"]
     fig, axes = plt.subplots(1, 2, figsize=(11, 5))
     for ax, prefix, title in ((axes[0], "b0", "before correction"), (axes[1], "b", "after")):
@@ -80,12 +77,12 @@ def midcourse_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathli
         ax.grid(alpha=0.3)
         ax.legend(loc="upper right", fontsize=8)
     fig.suptitle(f"{scenario.name}: B-plane dispersion at Mars")
-    save(fig, "b_plane_dispersion.png")
+    return fig
 
-    # Seed 001 Fig. 1: partials against the central-difference step, autodiff as reference.
-    sim, law = MidcourseSystem().build(scenario)
-    rows = ("B_R (m per m/s)", "B_T (m per m/s)", "t_TOF (s per m/s)")
-    wrt = ("∂/∂v_x", "∂/∂v_y", "∂/∂v_z")
+
+def _partials_vs_epsilon(plt, sim):
+    """Seed 001 Fig. 1: partials against the central-difference step, autodiff as reference."""
+    rows, wrt = ROWS, WRT
     eps = np.logspace(-6, 2, 33)
     k_cd, k_ad = (np.asarray(k) for k in midcourse_sim.partials_vs_step(sim, jnp.asarray(eps)))
     scale = np.abs(k_ad).max(axis=1)
@@ -106,9 +103,11 @@ def midcourse_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathli
     axes[0, 0].legend(fontsize=6)
     axes[1, 0].legend(fontsize=7)
     fig.suptitle("Partials vs step ε at the first fix (seed 001 Fig. 1); dashed: autodiff")
-    save(fig, "partials_vs_epsilon.png")
+    return fig
 
-    # Seed 001 Figs. 2-3 along the nominal, and the departures from autodiff.
+
+def _partials_vs_time(plt, sim, law):
+    """Seed 001 Figs. 2-3 along the nominal, and the departures of the methods from autodiff."""
     t_enc, t_fix = float(sim.t_encounter_s), float(sim.t_first_fix_s)
     span_days = (t_enc - t_fix) / 86400.0
     days = np.concatenate([np.linspace(span_days, 10.0, 20), np.geomspace(8.0, 1.1, 8)])
@@ -117,6 +116,7 @@ def midcourse_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathli
         sim, jnp.asarray(t_enc - days * 86400.0), eps_g, t_enc - 86400.0
     )
     ks = {method: np.asarray(k) for method, k in sweep.items()}
+    wrt, rows = WRT, ROWS
     methods = (
         ("central_difference", f"central difference, ε = {eps_g:g} m/s (Fig. 2)"),
         ("stm", "state-transition matrix (Fig. 3)"),
@@ -134,8 +134,11 @@ def midcourse_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathli
     axes[2, 0].invert_xaxis()  # shared x: flips both columns
     axes[0, 0].legend(fontsize=8)
     fig.suptitle("Partials vs time to encounter along the nominal (dashed: autodiff)")
-    save(fig, "partials_vs_time.png")
+    departure_figure = _sensitivity_departure(plt, days, ks, eps_g)
+    return fig, departure_figure
 
+
+def _sensitivity_departure(plt, days, ks, eps_g):
     fig, ax = plt.subplots(figsize=(9, 5))
     row_scale = np.abs(ks["autodiff"]).max(axis=2, keepdims=True)
     for method, label in (
@@ -151,9 +154,12 @@ def midcourse_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathli
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     ax.set_title("Departure of the sensitivity methods from autodiff along the nominal")
-    save(fig, "sensitivity_departure.png")
+    return fig
 
-    # Seed 001 Fig. 4: Δv per correction.
+
+def _dv_per_fix(plt, summary, runs, ok, scenario, sim):
+    """Seed 001 Fig. 4: Δv per correction."""
+    t_enc, t_fix = float(sim.t_encounter_s), float(sim.t_first_fix_s)
     columns = [c for c in runs if c.startswith("dv_per_fix_mps_")]
     columns.sort(key=lambda c: int(c.rsplit("_", 1)[1]))
     per_fix = np.stack([runs[c] for c in columns], axis=1)
@@ -173,7 +179,22 @@ def midcourse_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathli
     ax.legend(fontsize=8)
     total = summary.get("dv_mean_mps", np.nan)
     ax.set_title(f"{scenario.name}: Δv per correction (seed 001 Fig. 4); total {total:.4g} m/s")
-    save(fig, "dv_per_fix.png")
+    return fig
+
+
+def midcourse_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib.Path]:
+    """B-plane dispersion, seed 001 Figs. 1-4 and where the sensitivity methods depart."""
+    plt = pyplot()
+    ok = runs["status"] == Status.ok
+    files = []
+    save = saver(plt, out, files)
+    save(_b_plane_dispersion(plt, runs, ok, scenario), "b_plane_dispersion.png")
+    sim, law = MidcourseSystem().build(scenario)
+    save(_partials_vs_epsilon(plt, sim), "partials_vs_epsilon.png")
+    by_time, departure = _partials_vs_time(plt, sim, law)
+    save(by_time, "partials_vs_time.png")
+    save(departure, "sensitivity_departure.png")
+    save(_dv_per_fix(plt, summary, runs, ok, scenario, sim), "dv_per_fix.png")
     return files
 
 
