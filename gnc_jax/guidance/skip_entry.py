@@ -39,7 +39,7 @@ from ..geometry.sphere import (
     unit,
 )
 from ..integrate import rk4_step
-from ..root_finding import RegulaFalsiResult, RootStatus, bounded_regula_falsi
+from ..root_finding import RegulaFalsiResult, RootStatus, bounded_regula_falsi_with_aux
 from .base import register_law
 from .entry_common import (
     AbstractEntryGuidance,
@@ -362,7 +362,7 @@ class SkipEntryGuidance(AbstractEntryGuidance):
             p = self.predict(y, t, pulled_up, sigma_0, model, target_fixed, active)
             return p.miss_m, p.crossrange_m, p.steps.astype(float)
 
-        return bounded_regula_falsi(
+        return bounded_regula_falsi_with_aux(
             miss,
             sigma_prev,
             self.bracket_step_rad,
@@ -374,9 +374,6 @@ class SkipEntryGuidance(AbstractEntryGuidance):
             illinois=True,
             decreasing=True,
             enabled=enabled,
-            pass_active=True,
-            has_aux=True,
-            has_cost=True,
         )
 
     # ---- reference tracking (seed 003 §2.2, eqs. 6-7, 16-17) ----

@@ -10,6 +10,7 @@ predictor uses. The chute-deploy crossing at 10 km is located inside the step by
 Hermite interpolation.
 """
 
+import math
 from typing import NamedTuple
 
 import equinox as eqx
@@ -362,33 +363,14 @@ def _outcome(sim: CapsuleSimulation, c: _Carry, draws) -> CapsuleOutcome:
     )
 
 
-def build(scenario) -> tuple[CapsuleSimulation, SkipEntryGuidance]:
-    """Simulation data and guidance law of a validated capsule scenario (SI units).
+def _f64(x):
+    return jnp.asarray(x, dtype=jnp.float64)
 
-    The second-entry reference is designed by :mod:`gnc_jax.guidance.reference_design` for the
-    scenario's nominal vehicle, entry and target (cached on disk after the first design).
-    """
-    import math
 
-    from ..guidance.reference_design import NominalProblem, reference_for
-
-    cfg = scenario.config
-    e, v, a, act, dsp, g, ref, s = (
-        cfg[k]
-        for k in (
-            "entry",
-            "vehicle",
-            "atmosphere",
-            "actuator",
-            "dispersions",
-            "guidance",
-            "reference",
-            "simulation",
-        )
-    )
-    f = lambda x: jnp.asarray(x, dtype=jnp.float64)  # noqa: E731
+def _nominal(cfg: dict):
+    """Earth, nominal vehicle and atmosphere, and the nominal entry interface."""
+    e, v, a = cfg["entry"], cfg["vehicle"], cfg["atmosphere"]
     rad = math.radians
-    earth = EarthModel()
     vehicle = EntryVehicle(
         mass_kg=v["mass_kg"],
         reference_area_m2=v["area_m2"],
@@ -400,13 +382,21 @@ def build(scenario) -> tuple[CapsuleSimulation, SkipEntryGuidance]:
         model=a["model"], rho0=a["rho0_kgm3"], scale_height_m=a["scale_height_km"] * 1e3
     )
     entry = EntryConditions(
-        f(e["altitude_km"] * 1e3),
-        f(e["speed_kmps"] * 1e3),
-        f(rad(e["fpa_deg"])),
-        f(rad(e["azimuth_deg"])),
-        f(rad(e["longitude_deg"])),
-        f(rad(e["latitude_deg"])),
+        _f64(e["altitude_km"] * 1e3),
+        _f64(e["speed_kmps"] * 1e3),
+        _f64(rad(e["fpa_deg"])),
+        _f64(rad(e["azimuth_deg"])),
+        _f64(rad(e["longitude_deg"])),
+        _f64(rad(e["latitude_deg"])),
     )
+    return EarthModel(), vehicle, atmosphere, entry
+
+
+def _reference(cfg: dict, earth, vehicle, atmosphere, entry):
+    """The target (unit vector, Earth-fixed) and the designed second-entry reference."""
+    from ..guidance.reference_design import NominalProblem, reference_for
+
+    e, g, ref = cfg["entry"], cfg["guidance"], cfg["reference"]
     y0 = entry_state_from_conditions(entry, earth)
     target = destination(
         unit(y0.r), entry.azimuth, e["range_km"] * 1e3 / float(earth.equatorial_radius_m)
@@ -415,21 +405,28 @@ def build(scenario) -> tuple[CapsuleSimulation, SkipEntryGuidance]:
         model=EntryModel(vehicle, earth, atmosphere),
         entry=y0,
         target_fixed=target,
-        kepler_load_g=f(g["kepler_load_g"]),
-        chute_altitude_m=f(e["chute_altitude_km"] * 1e3),
-        v_end_mps=f(ref["v_end_mps"]),
+        kepler_load_g=_f64(g["kepler_load_g"]),
+        chute_altitude_m=_f64(e["chute_altitude_km"] * 1e3),
+        v_end_mps=_f64(ref["v_end_mps"]),
     )
     description = {
         "entry": e,
-        "vehicle": v,
-        "atmosphere": a,
+        "vehicle": cfg["vehicle"],
+        "atmosphere": cfg["atmosphere"],
         "kepler_load_g": g["kepler_load_g"],
         "v_end_mps": ref["v_end_mps"],
     }
     reference, _ = reference_for(
         problem, description, w_margin=ref["w_margin"], steps=ref["design_steps"]
     )
-    law = SkipEntryGuidance(
+    return target, reference
+
+
+def _law(cfg: dict, reference) -> SkipEntryGuidance:
+    """The skip-entry law of the scenario's ``[guidance]`` section, in SI units."""
+    e, g = cfg["entry"], cfg["guidance"]
+    f, rad = _f64, math.radians
+    return SkipEntryGuidance(
         reference=reference,
         k_drag_load=f(g["k_drag_load"]),
         k_hdot=f(g["k_hdot"]),
@@ -452,7 +449,37 @@ def build(scenario) -> tuple[CapsuleSimulation, SkipEntryGuidance]:
         n_bracket=int(g["n_bracket"]),
         n_iter=int(g["n_iter"]),
     )
+
+
+def _dispersions(dsp: dict) -> CapsuleDispersions:
+    """1-sigma dispersions from the scenario's 3-sigma values (mass: uniform half width)."""
+    f, rad = _f64, math.radians
     three = 1.0 / 3.0
+    return CapsuleDispersions(
+        speed_mps=f(dsp["speed_mps"] * three),
+        fpa_rad=f(rad(dsp["fpa_deg"]) * three),
+        heading_rad=f(rad(dsp["heading_deg"]) * three),
+        downrange_m=f(dsp["downrange_km"] * 1e3 * three),
+        altitude_m=f(dsp["altitude_km"] * 1e3 * three),
+        crossrange_m=f(dsp["crossrange_km"] * 1e3 * three),
+        lift_frac=f(dsp["cl_pct"] / 100 * three),
+        drag_frac=f(dsp["cd_pct"] / 100 * three),
+        density_frac=f(dsp["density_pct"] / 100 * three),
+        mass_frac_half_width=f(dsp["mass_pct"] / 100),
+    )
+
+
+def build(scenario) -> tuple[CapsuleSimulation, SkipEntryGuidance]:
+    """Simulation data and guidance law of a validated capsule scenario (SI units).
+
+    The second-entry reference is designed by :mod:`gnc_jax.guidance.reference_design` for the
+    scenario's nominal vehicle, entry and target (cached on disk after the first design).
+    """
+    cfg = scenario.config
+    e, act, g, s = cfg["entry"], cfg["actuator"], cfg["guidance"], cfg["simulation"]
+    earth, vehicle, atmosphere, entry = _nominal(cfg)
+    target, reference = _reference(cfg, earth, vehicle, atmosphere, entry)
+    rad = math.radians
     sim = CapsuleSimulation(
         entry=entry,
         vehicle=vehicle,
@@ -461,25 +488,14 @@ def build(scenario) -> tuple[CapsuleSimulation, SkipEntryGuidance]:
         actuator=BankActuator(
             max_rate=rad(act["max_rate_dps"]), max_acceleration=rad(act["max_accel_dps2"])
         ),
-        dispersions=CapsuleDispersions(
-            speed_mps=f(dsp["speed_mps"] * three),
-            fpa_rad=f(rad(dsp["fpa_deg"]) * three),
-            heading_rad=f(rad(dsp["heading_deg"]) * three),
-            downrange_m=f(dsp["downrange_km"] * 1e3 * three),
-            altitude_m=f(dsp["altitude_km"] * 1e3 * three),
-            crossrange_m=f(dsp["crossrange_km"] * 1e3 * three),
-            lift_frac=f(dsp["cl_pct"] / 100 * three),
-            drag_frac=f(dsp["cd_pct"] / 100 * three),
-            density_frac=f(dsp["density_pct"] / 100 * three),
-            mass_frac_half_width=f(dsp["mass_pct"] / 100),
-        ),
+        dispersions=_dispersions(cfg["dispersions"]),
         target_fixed=target,
-        ratio_filter_gain=f(g["ratio_filter_gain"]),
-        hold_bank_rad=f(rad(g["hold_bank_deg"])),
-        chute_altitude_m=f(e["chute_altitude_km"] * 1e3),
+        ratio_filter_gain=_f64(g["ratio_filter_gain"]),
+        hold_bank_rad=_f64(rad(g["hold_bank_deg"])),
+        chute_altitude_m=_f64(e["chute_altitude_km"] * 1e3),
         dt_s=float(s["dt_s"]),
         substeps=int(round(s["control_dt_s"] / s["dt_s"])),
         n_control=int(math.ceil(s["max_time_s"] / s["control_dt_s"])),
         pc_every=int(round(g["pc_period_s"] / s["control_dt_s"])),
     )
-    return sim, law
+    return sim, _law(cfg, reference)
