@@ -19,6 +19,16 @@ Phases (seed 003 §2, Fig. 1):
 The sign of the bank follows bank reversals inside a crossrange funnel that narrows with speed.
 Phase changes are hard logic (evaluation); gradients of the tracking gains flow through the
 second entry, which has no discrete logic apart from the reversals.
+
+The law is the ``"skip_entry"`` member of the capsule family
+(:class:`~gnc_jax.guidance.entry_common.AbstractEntryGuidance`): ``init(nav, ctx)`` gives a
+:class:`SkipEntryState`, ``step(state, nav, t, ctx)`` the bank command (rad) and the next state.
+From the accelerometer-measured drag and lift in ``nav`` it filters the ratios of measured to
+modelled drag and lift (its predictor's model) and forms the load, drag load and L/D it
+tracks. The outcome's diagnostics (predictions, corrector cycles and failures, reversals,
+event times, switch state, skip apogee, skip-out) accumulate in the state's ``log``, an
+:class:`~gnc_jax.guidance.entry_common.EntryGuidanceLog`, which also holds this step's
+corrector diagnostics for the trace.
 """
 
 from typing import NamedTuple

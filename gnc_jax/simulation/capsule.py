@@ -8,6 +8,13 @@ the aerodynamics and the atmosphere); the accelerometers measure the actual drag
 from which the guidance filters the ratios of actual to modelled drag and lift that its
 predictor uses. The chute-deploy crossing at 10 km is located inside the step by cubic
 Hermite interpolation.
+
+The simulator holds only the truth (dynamics, actuator, loads and heating, chute crossing), the
+accelerometer measurement and the outcome; the guidance is a member of the
+:class:`~gnc_jax.guidance.entry_common.AbstractEntryGuidance` family, called with
+``init(nav, ctx)`` and ``step(state, nav, t, ctx)`` (``nav`` an
+:class:`~gnc_jax.guidance.entry_common.EntryNav`, ``ctx`` the
+:class:`~gnc_jax.guidance.entry_common.EntryGuidanceContext` of :func:`guidance_context`).
 """
 
 import math
