@@ -60,12 +60,191 @@ class _Best(NamedTuple):
     aux: Any
 
 
+class _Tally(NamedTuple):
+    """What every stage carries on: convergence, the best point so far, the evaluations an
+    early-exit loop would have made and the summed cost of the evaluations."""
+
+    converged: Bool[Array, ""]
+    best: _Best
+    n_evals: Int[Array, ""]
+    cost: Any
+
+
+class _Bracketing(NamedTuple):
+    """Loop state of the bracketing search (eqs. 14-15)."""
+
+    x_same: Scalar  # last candidate with the sign of f(x_prev)
+    f_same: Scalar
+    x_other: Scalar  # first candidate with the other sign
+    f_other: Scalar
+    found: Bool[Array, ""]  # a sign change was found
+    stop: Bool[Array, ""]  # the bound was reached without one
+    tally: _Tally
+
+
+class _Falsi(NamedTuple):
+    """Loop state of the regula-falsi refinement (eqs. 12-13) on the bracket x_a < x_b."""
+
+    x_a: Scalar
+    f_a: Scalar
+    x_b: Scalar
+    f_b: Scalar
+    last_kept: Int[Array, ""]  # +1 if b was the endpoint kept last, -1 if a, 0 at first
+    tally: _Tally
+
+
+Objective = Callable[[Scalar, Bool[Array, ""]], tuple[Scalar, Any, Any]]
+
+
 def _keep_best(best: _Best, x: Scalar, f: Scalar, aux, active: Bool[Array, ""]) -> _Best:
     better = active & (jnp.abs(f) < jnp.abs(best.f))
     return _Best(
         jnp.where(better, x, best.x),
         jnp.where(better, f, best.f),
         jax.tree_util.tree_map(lambda a, b: jnp.where(better, a, b), aux, best.aux),
+    )
+
+
+def _evaluate(objective: Objective, x, active, tol, tally: _Tally):
+    """``f(x)``, whether it is within ``tol`` (for an ``active`` evaluation), and the tally
+    updated with it."""
+    f, aux, cost = objective(x, active)
+    hit = active & (jnp.abs(f) < tol)
+    tally = _Tally(
+        converged=tally.converged | hit,
+        best=_keep_best(tally.best, x, f, aux, active),
+        n_evals=tally.n_evals + active,
+        cost=tally.cost + cost,
+    )
+    return f, hit, tally
+
+
+def _bracket(objective: Objective, x0, f0, step, lower, upper, tol, n_bracket, up, tally):
+    """Candidates x_n = clip(x0 +/- n step), n = 1..n_bracket (eq. 15), until f changes sign.
+
+    Returns the bracket (x_a, f_a, x_b, f_b) with x_a < x_b -- [last candidate with the sign
+    of f(x0), first with the other sign] -- whether one was found, and the tally."""
+    bound = jnp.where(up, upper, lower)
+
+    def bracket_step(s: _Bracketing, n):
+        active = ~(s.found | s.stop | s.tally.converged)
+        x_n = jnp.where(up, jnp.minimum(x0 + n * step, upper), jnp.maximum(x0 - n * step, lower))
+        f_n, converged_n, tally = _evaluate(objective, x_n, active, tol, s.tally)
+        crossed = active & ~converged_n & (jnp.sign(f_n) != jnp.sign(f0))
+        same = active & ~converged_n & ~crossed
+        return _Bracketing(
+            x_same=jnp.where(same, x_n, s.x_same),
+            f_same=jnp.where(same, f_n, s.f_same),
+            x_other=jnp.where(crossed, x_n, s.x_other),
+            f_other=jnp.where(crossed, f_n, s.f_other),
+            found=s.found | crossed,
+            stop=s.stop | (same & (x_n == bound)),
+            tally=tally,
+        ), None
+
+    init = _Bracketing(
+        x_same=x0,
+        f_same=f0,
+        x_other=x0,
+        f_other=f0,
+        found=jnp.asarray(False),
+        stop=jnp.where(up, x0 >= upper, x0 <= lower),
+        tally=tally,
+    )
+    steps = jnp.arange(1, n_bracket + 1, dtype=float)
+    s, _ = jax.lax.scan(bracket_step, init, steps)
+    swap = s.x_other < s.x_same
+    x_a, f_a = jnp.where(swap, s.x_other, s.x_same), jnp.where(swap, s.f_other, s.f_same)
+    x_b, f_b = jnp.where(swap, s.x_same, s.x_other), jnp.where(swap, s.f_same, s.f_other)
+    return (x_a, f_a, x_b, f_b), s.found, s.tally
+
+
+def _refine(objective: Objective, bracket, bracketed, tol, n_iter, illinois, tally) -> _Tally:
+    """Regula falsi (eqs. 12-13) on the bracket, with the Illinois rule if ``illinois``."""
+
+    def falsi_step(s: _Falsi, _):
+        active = bracketed & ~s.tally.converged
+        # Guarded so masked iterations (no bracket, f_a == f_b) give no NaN, nor NaN gradients.
+        ok = active & (s.f_b != s.f_a)
+        denominator = jnp.where(ok, s.f_b - s.f_a, 1.0)
+        x_c = jnp.where(ok, (s.x_a * s.f_b - s.x_b * s.f_a) / denominator, s.x_a)
+        x_c = jnp.clip(x_c, s.x_a, s.x_b)  # rounding must not leave the bracket
+        f_c, converged_c, tally = _evaluate(objective, x_c, active, tol, s.tally)
+        replace_a = active & ~converged_c & (jnp.sign(f_c) == jnp.sign(s.f_a))
+        replace_b = active & ~converged_c & ~replace_a
+        kept = jnp.where(replace_a, 1, jnp.where(replace_b, -1, 0))
+        halve = illinois & (kept != 0) & (kept == s.last_kept)
+        return _Falsi(
+            x_a=jnp.where(replace_a, x_c, s.x_a),
+            f_a=jnp.where(replace_a, f_c, jnp.where(halve & replace_b, 0.5 * s.f_a, s.f_a)),
+            x_b=jnp.where(replace_b, x_c, s.x_b),
+            f_b=jnp.where(replace_b, f_c, jnp.where(halve & replace_a, 0.5 * s.f_b, s.f_b)),
+            last_kept=jnp.where(active, kept, s.last_kept),
+            tally=tally,
+        ), None
+
+    x_a, f_a, x_b, f_b = bracket
+    init = _Falsi(x_a=x_a, f_a=f_a, x_b=x_b, f_b=f_b, last_kept=jnp.asarray(0), tally=tally)
+    s, _ = jax.lax.scan(falsi_step, init, None, length=n_iter)
+    return s.tally
+
+
+def bounded_regula_falsi_with_aux(
+    objective: Objective,
+    x_prev: Scalar,
+    step: Scalar,
+    lower: Scalar,
+    upper: Scalar,
+    tol: Scalar,
+    n_bracket: int,
+    n_iter: int,
+    illinois: bool = True,
+    decreasing: bool = True,
+    enabled=True,
+) -> RegulaFalsiResult:
+    """:func:`bounded_regula_falsi` of an objective ``objective(x, active) -> (f, aux, cost)``.
+
+    ``active`` says whether the evaluation is used: an expensive objective (a trajectory
+    prediction in a ``while_loop``) can skip masked evaluations, so under ``vmap`` the batch
+    pays only for the runs that still iterate. The result's ``aux`` is that of the returned x
+    (the evaluated point with the smallest |f|), so a caller gets, say, the whole prediction of
+    its solution without evaluating it again; its ``cost`` is the sum over every evaluation
+    (e.g. integration steps actually taken). ``aux`` may be ``None``; ``cost`` must add up.
+    Other arguments as :func:`bounded_regula_falsi`.
+    """
+    lower = jnp.asarray(lower, dtype=float)
+    upper = jnp.asarray(upper, dtype=float)
+    x0 = jnp.clip(jnp.asarray(x_prev, dtype=float), lower, upper)
+    enabled = jnp.asarray(enabled)
+
+    f0, aux0, cost0 = objective(x0, enabled)
+    tally = _Tally(
+        converged=(jnp.abs(f0) < tol) | ~enabled,
+        best=_Best(x0, f0, aux0),
+        n_evals=enabled.astype(int),
+        cost=cost0,
+    )
+    sign = 1.0 if decreasing else -1.0
+    up = sign * f0 >= 0.0
+    bracket, bracketed, tally = _bracket(
+        objective, x0, f0, step, lower, upper, tol, n_bracket, up, tally
+    )
+    tally = _refine(objective, bracket, bracketed, tol, n_iter, illinois, tally)
+
+    status = jnp.where(
+        tally.converged,
+        RootStatus.ok,
+        jnp.where(bracketed, RootStatus.no_convergence, RootStatus.not_bracketed),
+    )
+    return RegulaFalsiResult(
+        x=tally.best.x,
+        f_x=tally.best.f,
+        converged=tally.converged,
+        n_evals_early_exit=tally.n_evals,
+        n_evals_total=jnp.asarray(1 + n_bracket + n_iter),
+        status=status,
+        aux=tally.best.aux,
+        cost=tally.cost,
     )
 
 
@@ -81,14 +260,13 @@ def bounded_regula_falsi(
     illinois: bool = True,
     decreasing: bool = True,
     enabled=True,
-    pass_active: bool = False,
-    has_aux: bool = False,
-    has_cost: bool = False,
 ) -> RegulaFalsiResult:
     """Solve fun(x) = 0 in [lower, upper], warm-started at ``x_prev`` (seed 003 eqs. 11-15).
 
     Args:
-        fun: pure scalar function of x (a closure over vmapped data is fine).
+        fun: pure scalar function of x (a closure over vmapped data is fine); see
+            :func:`bounded_regula_falsi_with_aux` for an objective with an auxiliary result,
+            a cost, or that skips masked evaluations.
         x_prev: previous solution, the first point tested (clipped into [lower, upper]).
         step: bracketing step Delta sigma > 0 (eq. 15).
         lower, upper: bounds of x; bracketing candidates are clipped to them.
@@ -102,18 +280,8 @@ def bounded_regula_falsi(
         decreasing: monotonicity assumption that picks the bracketing direction (eqs. 14-15).
             True (the seed's case: more bank, less range): f(x_prev) >= 0 steps up, f < 0
             steps down. False: the opposite.
-        enabled: (traced bool) False turns the whole solve into no-op evaluations: under
-            ``vmap`` a run that does not need a solution this cycle costs nothing when ``fun``
-            honours ``active`` (see ``pass_active``).
-        pass_active: call ``fun(x, active)`` where ``active`` says whether the result is
-            used; an expensive ``fun`` (a trajectory prediction in a ``while_loop``) can then
-            skip masked evaluations, so under ``vmap`` the batch pays only for the runs
-            that still iterate.
-        has_aux: ``fun`` returns ``(f, aux)``; the result's ``aux`` is that of the returned x
-            (the evaluated point with the smallest |f|), so a caller gets, say, the whole
-            prediction of its solution without evaluating it again.
-        has_cost: ``fun`` returns ``(f, aux, cost)`` (requires ``has_aux``); the result's
-            ``cost`` is the sum over every evaluation (e.g. integration steps actually taken).
+        enabled: (traced bool) False turns the whole solve into no-op evaluations (counted as
+            none, the result is x_prev clipped).
 
     Bracketing: candidates x_n = clip(x_prev +/- n step) are tried until f changes sign; the
     bracket is then [last candidate with the sign of f(x_prev), first with the other sign] --
@@ -125,110 +293,10 @@ def bounded_regula_falsi(
     Regula falsi (eq. 12): x_c = (x_a f(x_b) - x_b f(x_a)) / (f(x_b) - f(x_a)), x_a < x_b,
     replacing the endpoint whose f has the sign of f(x_c) (eq. 13), until |f(x_c)| < tol.
     """
-    sign = 1.0 if decreasing else -1.0
-    lower = jnp.asarray(lower, dtype=float)
-    upper = jnp.asarray(upper, dtype=float)
-    x0 = jnp.clip(jnp.asarray(x_prev, dtype=float), lower, upper)
-    enabled = jnp.asarray(enabled)
 
-    def call(x, active):
-        out = fun(x, active) if pass_active else fun(x)
-        if has_cost:
-            f, aux, c = out
-            return f, aux, c
-        return (out + (jnp.zeros(()),)) if has_aux else (out, None, jnp.zeros(()))
+    def objective(x, active):
+        return fun(x), None, jnp.zeros(())
 
-    f0, aux0, cost0 = call(x0, enabled)
-    converged = (jnp.abs(f0) < tol) | ~enabled
-    best = _Best(x0, f0, aux0)
-    n_evals = enabled.astype(int)
-    cost = cost0
-
-    # --- bracketing (eqs. 14-15) ---
-    up = sign * f0 >= 0.0
-    bound = jnp.where(up, upper, lower)
-    at_bound = jnp.where(up, x0 >= upper, x0 <= lower)
-
-    def bracket_step(carry, n):
-        x_same, f_same, x_other, f_other, found, stop, converged, best, n_evals, cost = carry
-        active = ~(found | stop | converged)
-        x_n = jnp.where(up, jnp.minimum(x0 + n * step, upper), jnp.maximum(x0 - n * step, lower))
-        f_n, aux_n, cost_n = call(x_n, active)
-        n_evals = n_evals + active
-        converged_n = active & (jnp.abs(f_n) < tol)
-        crossed = active & ~converged_n & (jnp.sign(f_n) != jnp.sign(f0))
-        same = active & ~converged_n & ~crossed
-        best = _keep_best(best, x_n, f_n, aux_n, active)
-        return (
-            jnp.where(same, x_n, x_same),
-            jnp.where(same, f_n, f_same),
-            jnp.where(crossed, x_n, x_other),
-            jnp.where(crossed, f_n, f_other),
-            found | crossed,
-            stop | (same & (x_n == bound)),
-            converged | converged_n,
-            best,
-            n_evals,
-            cost + cost_n,
-        ), None
-
-    init = (x0, f0, x0, f0, jnp.asarray(False), at_bound, converged, best, n_evals, cost)
-    steps = jnp.arange(1, n_bracket + 1, dtype=float)
-    (x_same, f_same, x_other, f_other, bracketed, _, converged, best, n_evals, cost), _ = (
-        jax.lax.scan(bracket_step, init, steps)
-    )
-
-    # --- regula falsi (eqs. 11-13) on x_a < x_b ---
-    swap = x_other < x_same
-    x_a, f_a = jnp.where(swap, x_other, x_same), jnp.where(swap, f_other, f_same)
-    x_b, f_b = jnp.where(swap, x_same, x_other), jnp.where(swap, f_same, f_other)
-
-    def falsi_step(carry, _):
-        x_a, f_a, x_b, f_b, last_kept, converged, best, n_evals, cost = carry
-        active = bracketed & ~converged
-        # Guarded so masked iterations (no bracket, f_a == f_b) give no NaN, nor NaN gradients.
-        ok = active & (f_b != f_a)
-        denominator = jnp.where(ok, f_b - f_a, 1.0)
-        x_c = jnp.where(ok, (x_a * f_b - x_b * f_a) / denominator, x_a)
-        x_c = jnp.clip(x_c, x_a, x_b)  # rounding must not leave the bracket
-        f_c, aux_c, cost_c = call(x_c, active)
-        n_evals = n_evals + active
-        converged_c = active & (jnp.abs(f_c) < tol)
-        replace_a = active & ~converged_c & (jnp.sign(f_c) == jnp.sign(f_a))
-        replace_b = active & ~converged_c & ~replace_a
-        best = _keep_best(best, x_c, f_c, aux_c, active)
-        # last_kept: +1 if b was the endpoint kept last time, -1 if a, 0 before the first step.
-        kept = jnp.where(replace_a, 1, jnp.where(replace_b, -1, 0))
-        halve = illinois & (kept != 0) & (kept == last_kept)
-        f_a_new = jnp.where(replace_a, f_c, jnp.where(halve & replace_b, 0.5 * f_a, f_a))
-        f_b_new = jnp.where(replace_b, f_c, jnp.where(halve & replace_a, 0.5 * f_b, f_b))
-        return (
-            jnp.where(replace_a, x_c, x_a),
-            f_a_new,
-            jnp.where(replace_b, x_c, x_b),
-            f_b_new,
-            jnp.where(active, kept, last_kept),
-            converged | converged_c,
-            best,
-            n_evals,
-            cost + cost_c,
-        ), None
-
-    init = (x_a, f_a, x_b, f_b, jnp.asarray(0), converged, best, n_evals, cost)
-    (*_, converged, best, n_evals, cost), _ = jax.lax.scan(falsi_step, init, None, length=n_iter)
-
-    status = jnp.where(
-        converged,
-        RootStatus.ok,
-        jnp.where(bracketed, RootStatus.no_convergence, RootStatus.not_bracketed),
-    )
-    return RegulaFalsiResult(
-        x=best.x,
-        f_x=best.f,
-        converged=converged,
-        n_evals_early_exit=n_evals,
-        n_evals_total=jnp.asarray(1 + n_bracket + n_iter),
-        status=status,
-        aux=best.aux,
-        cost=cost,
+    return bounded_regula_falsi_with_aux(
+        objective, x_prev, step, lower, upper, tol, n_bracket, n_iter, illinois, decreasing, enabled
     )

@@ -1,17 +1,23 @@
-"""Pieces shared by the capsule's on-board predictor and its offline reference design.
+"""The capsule's guidance-law family and the pieces its laws and reference design share.
 
-Both fly the longitudinal ("vertical-plane") problem: lift acts in the vertical plane with the
-magnitude L cos(sigma), i.e. the lateral component of a banked lift vector is averaged out by
-the bank reversals. The bank magnitude follows a profile of Earth-relative speed.
+:class:`AbstractEntryGuidance` is the family base of the capsule (entry) laws: ``nav`` is an
+:class:`EntryNav` (navigated state and accelerometer-measured drag and lift), ``ctx`` an
+:class:`EntryGuidanceContext` (the on-board model and mission data), ``step`` returns the bank
+command in rad.
+
+The on-board predictor and the offline reference design fly the longitudinal
+("vertical-plane") problem: lift acts in the vertical plane with the magnitude L cos(sigma),
+i.e. the lateral component of a banked lift vector is averaged out by the bank reversals. The
+bank magnitude follows a profile of Earth-relative speed.
 """
 
-from typing import NamedTuple
+from typing import ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._types import Scalar, Vector3
+from .._types import Array, Float, Scalar, Vector3
 from ..dynamics.atmosphere import Atmosphere
 from ..dynamics.entry import (
     G0,
@@ -25,6 +31,7 @@ from ..dynamics.entry import (
     sensed_load_g,
 )
 from ..geometry.sphere import central_angle, to_earth_fixed, unit
+from .base import AbstractGuidanceLaw
 
 
 class EntryModel(eqx.Module):
@@ -64,6 +71,83 @@ class EntryModel(eqx.Module):
         return sensed_load_g(y.r, y.v, vehicle, self.earth, self.atmosphere)
 
 
+class EntryNav(NamedTuple):
+    """What the sensors give a capsule law: the navigated state (perfect navigation) and the
+    drag and lift accelerations the accelerometers measure, m/s^2 (see :func:`drag_and_lift`)."""
+
+    y: EntryState
+    drag_mps2: Scalar
+    lift_mps2: Scalar
+
+
+class EntryGuidanceContext(eqx.Module):
+    """Mission data known on board a capsule.
+
+    Attributes:
+        model: the nominal vehicle, Earth and atmosphere (ratios 1).
+        target_fixed: chute-deploy target, unit vector, Earth-fixed.
+        hold_bank_rad: bank held before guidance starts.
+        ratio_filter_gain: gain per control step of the measured drag/lift ratio filter.
+        pc_every: control steps per predictor-corrector cycle.
+    """
+
+    model: EntryModel
+    target_fixed: Vector3
+    hold_bank_rad: Scalar
+    ratio_filter_gain: Scalar
+    pc_every: int = eqx.field(static=True, default=4)
+
+
+class EntryGuidanceLog(NamedTuple):
+    """Diagnostics a capsule law keeps in its state's ``log`` for the run's outcome and trace.
+
+    Attributes:
+        predictions: predictions an early-exit corrector would have made (whole flight).
+        cycle_predictions_max: the most of them in one corrector cycle.
+        pc_cycles, corrector_failures: corrector cycles run, and those not ``ok``.
+        reversals: bank reversals.
+        predictor_steps: RK4 steps of all predictions.
+        t_guidance_s, t_kepler_s, t_switch_s: times guidance started, the Kepler phase began,
+            the second entry began (0 if never).
+        switch: (speed m/s, altitude m, Ḣ m/s, ground range flown from ``entry_r_m`` m) at the
+            switch point (zeros if never).
+        skip_apogee_m: highest altitude of the Kepler phase.
+        skipped_out: the vehicle climbed above the law's skip-out altitude while guided.
+        entry_r_m: ECI position at ``init`` (t = 0), where the switch range is measured from.
+        step_predictions, step_miss_m: predictions and corrector residual of this step's
+            corrector cycle (0 without one).
+    """
+
+    predictions: Array
+    cycle_predictions_max: Array
+    pc_cycles: Array
+    corrector_failures: Array
+    reversals: Array
+    predictor_steps: Scalar
+    t_guidance_s: Scalar
+    t_kepler_s: Scalar
+    t_switch_s: Scalar
+    switch: Float[Array, "4"]
+    skip_apogee_m: Scalar
+    skipped_out: Array
+    entry_r_m: Vector3
+    step_predictions: Array
+    step_miss_m: Scalar
+
+
+class AbstractEntryGuidance(AbstractGuidanceLaw):
+    """Family base of the capsule (skip-entry) guidance laws.
+
+    ``init(nav: EntryNav, ctx: EntryGuidanceContext) -> state`` and
+    ``step(state, nav, t, ctx) -> (bank command in rad, state)``. The capsule simulator reads
+    from the state ``log`` (an :class:`EntryGuidanceLog`), ``phase``, ``pulled_up``,
+    ``sigma_0``, ``bank_offset``, ``drag_ratio``, ``lift_ratio`` and ``last_status`` (a
+    :class:`~gnc_jax.root_finding.RootStatus` code) for the outcome and the trace.
+    """
+
+    laws: ClassVar[dict[str, type]] = {}
+
+
 class FlightVariables(NamedTuple):
     """Longitudinal variables of the guidance (seed 003 §2-3), Earth-relative."""
 
@@ -80,6 +164,19 @@ def flight_variables(y: EntryState, earth: EarthModel) -> FlightVariables:
     return FlightVariables(
         speed, jnp.arcsin(jnp.clip(hdot / speed, -1, 1)), altitude(y.r, earth), hdot
     )
+
+
+def drag_and_lift(
+    y: EntryState, vehicle: EntryVehicle, earth: EarthModel, atmosphere: Atmosphere
+) -> tuple[Scalar, Scalar]:
+    """Drag and lift accelerations (m/s^2) of ``vehicle`` at ``y``: the aerodynamic
+    acceleration's components against and normal to the Earth-relative velocity, which is what
+    body-mounted accelerometers measure."""
+    a = aerodynamic_acceleration(y.r, y.v, 0.0, vehicle, earth, atmosphere)
+    v_rel = y.v - jnp.cross(earth.angular_velocity(), y.r)
+    drag = -jnp.dot(a, unit(v_rel))
+    lift = jnp.linalg.norm(a + drag * unit(v_rel))
+    return drag, lift
 
 
 def drag_load_g(y: EntryState, model: EntryModel) -> Scalar:

@@ -19,6 +19,16 @@ Phases (seed 003 §2, Fig. 1):
 The sign of the bank follows bank reversals inside a crossrange funnel that narrows with speed.
 Phase changes are hard logic (evaluation); gradients of the tracking gains flow through the
 second entry, which has no discrete logic apart from the reversals.
+
+The law is the ``"skip_entry"`` member of the capsule family
+(:class:`~gnc_jax.guidance.entry_common.AbstractEntryGuidance`): ``init(nav, ctx)`` gives a
+:class:`SkipEntryState`, ``step(state, nav, t, ctx)`` the bank command (rad) and the next state.
+From the accelerometer-measured drag and lift in ``nav`` it filters the ratios of measured to
+modelled drag and lift (its predictor's model) and forms the load, drag load and L/D it
+tracks. The outcome's diagnostics (predictions, corrector cycles and failures, reversals,
+event times, switch state, skip apogee, skip-out) accumulate in the state's ``log``, an
+:class:`~gnc_jax.guidance.entry_common.EntryGuidanceLog`, which also holds this step's
+corrector diagnostics for the trace.
 """
 
 from typing import NamedTuple
@@ -28,17 +38,31 @@ import jax
 import jax.numpy as jnp
 
 from .._types import Array, Float, Scalar
-from ..dynamics.entry import EntryState
+from ..dynamics.entry import G0, EntryState
 from ..geometry.sphere import (
     along_cross_track,
+    along_track_to_go,
     crossrange_to_target,
+    range_rate_to_target,
     to_earth_fixed,
     to_inertial,
     unit,
 )
 from ..integrate import rk4_step
-from ..root_finding import bounded_regula_falsi
-from .entry_common import EntryModel, FlightVariables, flight_variables, hermite_crossing
+from ..root_finding import RegulaFalsiResult, RootStatus, bounded_regula_falsi_with_aux
+from .base import register_law
+from .entry_common import (
+    AbstractEntryGuidance,
+    EntryGuidanceContext,
+    EntryGuidanceLog,
+    EntryModel,
+    EntryNav,
+    FlightVariables,
+    drag_and_lift,
+    flight_variables,
+    ground_range_m,
+    hermite_crossing,
+)
 
 
 class ReferenceTrajectory(eqx.Module):
@@ -131,7 +155,60 @@ class Prediction(NamedTuple):
     steps: Array  # integration steps used
 
 
-class SkipEntryGuidance(eqx.Module):
+class SkipEntryState(NamedTuple):
+    """State of :class:`SkipEntryGuidance` between control steps.
+
+    Attributes:
+        phase: 0 hold, 1 predictor-corrector, 2 Kepler, 3 tracking.
+        pulled_up: Ḣ has been positive since guidance started.
+        sigma_0: corrector solution, rad (start of the first-entry profile).
+        sign: sign of the bank (+1 right, -1 left), flipped by the reversals.
+        bank_mag: bank magnitude commanded last, rad (held through the Kepler phase).
+        bank_offset: switch-point compensation of the reference bank (eqs. 16-17), rad.
+        drag_ratio, lift_ratio: filtered ratios of measured to modelled drag and lift.
+        last_status: :class:`~gnc_jax.root_finding.RootStatus` of the last corrector cycle.
+        predicted_crossrange: crossrange at the switch point of the last corrector solution, m.
+        step: control steps taken; the corrector runs when ``step % pc_every == 0``.
+        log: the diagnostics of the outcome and the trace.
+    """
+
+    phase: Array
+    pulled_up: Array
+    sigma_0: Scalar
+    sign: Scalar
+    bank_mag: Scalar
+    bank_offset: Scalar
+    drag_ratio: Scalar
+    lift_ratio: Scalar
+    last_status: Array
+    predicted_crossrange: Scalar
+    step: Array
+    log: EntryGuidanceLog
+
+
+class _PhaseEvents(NamedTuple):
+    """This step's phase changes (each gated by the law being active)."""
+
+    start: Array  # 0 -> 1: the load exceeded ng0
+    to_kepler: Array  # 1 -> 2
+    to_track: Array  # 1 or 2 -> 3: the switch point
+
+
+class _PredictorState(NamedTuple):
+    y: EntryState
+    t: Scalar
+    pulled_up: Array
+    kepler: Array
+    second: Array
+    ng: Scalar
+    kind: Array  # -1 running, else that of Prediction (3: inactive, no step taken)
+    k: Array
+    y_end: EntryState
+    t_end: Scalar
+
+
+@register_law("skip_entry")
+class SkipEntryGuidance(AbstractEntryGuidance):
     """The combined predictor-corrector / reference-trajectory law of seed 003.
 
     Gains and thresholds are array leaves (differentiable); loop sizes are static.
@@ -202,68 +279,73 @@ class SkipEntryGuidance(eqx.Module):
         of steps returns a large overshoot. Under ``vmap`` the ``while_loop`` runs while one
         active run still integrates; an inactive run does no step.
         """
+        v_0 = flight_variables(y, model.earth).speed_mps
+        f = jnp.asarray(False)
+        c0 = _PredictorState(
+            y=y,
+            t=jnp.asarray(t, float),
+            pulled_up=jnp.asarray(pulled_up),
+            kepler=f,
+            second=f,
+            ng=model.load_g(y),
+            kind=jnp.where(active, -1, 3),
+            k=jnp.asarray(0),
+            y_end=y,
+            t_end=jnp.asarray(t, float),
+        )
+        c = jax.lax.while_loop(
+            lambda c: (c.kind < 0) & (c.k < self.predictor_max_steps),
+            lambda c: self._predictor_step(c, sigma_0, v_0, model),
+            c0,
+        )
+        return self._prediction(c, y, t, model, target_fixed)
+
+    def _predictor_step(self, c: "_PredictorState", sigma_0, v_0, model) -> "_PredictorState":
+        """One RK4 step of the prediction, and the end point if it lies inside the step."""
         earth = model.earth
         dt = self.predictor_dt_s
-        v_0 = flight_variables(y, earth).speed_mps
-
-        class C(NamedTuple):
-            y: EntryState
-            t: Scalar
-            pulled_up: Array
-            kepler: Array
-            second: Array
-            ng: Scalar
-            kind: Array  # -1 running
-            k: Array
-            y_end: EntryState
-            t_end: Scalar
-
-        def cond(c):
-            return (c.kind < 0) & (c.k < self.predictor_max_steps)
-
-        def body(c):
-            fv = flight_variables(c.y, earth)
-            bank = jnp.where(
-                c.second,
-                self.reference.lookup(fv.speed_mps)[0],
-                self.profile(sigma_0, v_0, fv.speed_mps),
-            )
-            y1 = rk4_step(model.vertical_plane_field, c.t, c.y, dt, jnp.cos(bank))
-            fv1 = flight_variables(y1, earth)
-            ng1 = model.load_g(y1)
-            pulled = c.pulled_up | (fv1.hdot_mps > 0.0)
-            kepler = c.kepler | (pulled & (ng1 < self.kepler_load_g))
-            descending = pulled & (fv1.hdot_mps < 0.0) & (ng1 >= self.kepler_load_g)
-            switch = kepler & descending
-            second = c.second | (~kepler & descending)
-            chute = fv1.altitude_m < self.chute_altitude_m
-            skip = fv1.altitude_m > self.skip_out_altitude_m
-            # switch point: linear interpolation of the load crossing inside the step
-            s_sw = jnp.clip(
-                (self.kepler_load_g - c.ng) / jnp.where(ng1 != c.ng, ng1 - c.ng, 1.0), 0.0, 1.0
-            )
-            s_ch = hermite_crossing(
-                fv.altitude_m, fv.hdot_mps, fv1.altitude_m, fv1.hdot_mps, dt, self.chute_altitude_m
-            )
-            s = jnp.where(switch, s_sw, s_ch)
-            y_end = jax.tree_util.tree_map(lambda a, b: a + s * (b - a), c.y, y1)
-            kind = jnp.where(switch, 0, jnp.where(chute, 1, jnp.where(skip, 2, -1)))
-            return C(y1, c.t + dt, pulled, kepler, second, ng1, kind, c.k + 1, y_end, c.t + s * dt)
-
-        f = jnp.asarray(False)
-        c0 = C(
-            y,
-            jnp.asarray(t, float),
-            jnp.asarray(pulled_up),
-            f,
-            f,
-            model.load_g(y),
-            jnp.where(active, -1, 3),
-            jnp.asarray(0),
-            y,
-            jnp.asarray(t, float),
+        fv = flight_variables(c.y, earth)
+        bank = jnp.where(
+            c.second,
+            self.reference.lookup(fv.speed_mps)[0],
+            self.profile(sigma_0, v_0, fv.speed_mps),
         )
-        c = jax.lax.while_loop(cond, body, c0)
+        y1 = rk4_step(model.vertical_plane_field, c.t, c.y, dt, jnp.cos(bank))
+        fv1 = flight_variables(y1, earth)
+        ng1 = model.load_g(y1)
+        pulled = c.pulled_up | (fv1.hdot_mps > 0.0)
+        kepler = c.kepler | (pulled & (ng1 < self.kepler_load_g))
+        descending = pulled & (fv1.hdot_mps < 0.0) & (ng1 >= self.kepler_load_g)
+        switch = kepler & descending
+        second = c.second | (~kepler & descending)
+        chute = fv1.altitude_m < self.chute_altitude_m
+        skip = fv1.altitude_m > self.skip_out_altitude_m
+        # switch point: linear interpolation of the load crossing inside the step
+        s_sw = jnp.clip(
+            (self.kepler_load_g - c.ng) / jnp.where(ng1 != c.ng, ng1 - c.ng, 1.0), 0.0, 1.0
+        )
+        s_ch = hermite_crossing(
+            fv.altitude_m, fv.hdot_mps, fv1.altitude_m, fv1.hdot_mps, dt, self.chute_altitude_m
+        )
+        s = jnp.where(switch, s_sw, s_ch)
+        y_end = jax.tree_util.tree_map(lambda a, b: a + s * (b - a), c.y, y1)
+        kind = jnp.where(switch, 0, jnp.where(chute, 1, jnp.where(skip, 2, -1)))
+        return _PredictorState(
+            y=y1,
+            t=c.t + dt,
+            pulled_up=pulled,
+            kepler=kepler,
+            second=second,
+            ng=ng1,
+            kind=kind,
+            k=c.k + 1,
+            y_end=y_end,
+            t_end=c.t + s * dt,
+        )
+
+    def _prediction(self, c: "_PredictorState", y, t, model, target_fixed) -> Prediction:
+        """Range error and crossrange of a finished prediction started at ``(y, t)``."""
+        earth = model.earth
         kind = jnp.where(c.kind < 0, 2, c.kind)  # out of steps: treat as a skip-out
         r_e = earth.equatorial_radius_m
         # Signed along-track position of the end point relative to the target, on the great
@@ -290,7 +372,7 @@ class SkipEntryGuidance(eqx.Module):
             p = self.predict(y, t, pulled_up, sigma_0, model, target_fixed, active)
             return p.miss_m, p.crossrange_m, p.steps.astype(float)
 
-        return bounded_regula_falsi(
+        return bounded_regula_falsi_with_aux(
             miss,
             sigma_prev,
             self.bracket_step_rad,
@@ -302,9 +384,6 @@ class SkipEntryGuidance(eqx.Module):
             illinois=True,
             decreasing=True,
             enabled=enabled,
-            pass_active=True,
-            has_aux=True,
-            has_cost=True,
         )
 
     # ---- reference tracking (seed 003 §2.2, eqs. 6-7, 16-17) ----
@@ -352,3 +431,211 @@ class SkipEntryGuidance(eqx.Module):
 
     def funnel_m(self, speed):
         return self.funnel_base_m + self.funnel_quadratic_s2_m * speed**2
+
+    # ---- the guidance-law protocol ----
+    def init(self, nav: EntryNav, ctx: EntryGuidanceContext) -> SkipEntryState:
+        """Hold phase at t = 0, with the nominal first-entry bank as the corrector's guess."""
+        z = jnp.zeros(())
+        zi = jnp.zeros((), int)
+        log = EntryGuidanceLog(
+            predictions=zi,
+            cycle_predictions_max=zi,
+            pc_cycles=zi,
+            corrector_failures=zi,
+            reversals=zi,
+            predictor_steps=z,
+            t_guidance_s=z,
+            t_kepler_s=z,
+            t_switch_s=z,
+            switch=jnp.zeros(4),
+            skip_apogee_m=z,
+            skipped_out=jnp.asarray(False),
+            entry_r_m=nav.y.r,
+            step_predictions=zi,
+            step_miss_m=z,
+        )
+        return SkipEntryState(
+            phase=zi,
+            pulled_up=jnp.asarray(False),
+            sigma_0=self.reference.first_entry_bank_rad,
+            sign=jnp.ones(()),
+            bank_mag=ctx.hold_bank_rad,
+            bank_offset=z,
+            drag_ratio=jnp.ones(()),
+            lift_ratio=jnp.ones(()),
+            last_status=zi,
+            predicted_crossrange=z,
+            step=zi,
+            log=log,
+        )
+
+    def step(self, state: SkipEntryState, nav: EntryNav, t, ctx: EntryGuidanceContext):
+        """One control step: phase logic, the corrector every ``pc_every`` steps, the bank
+        magnitude of the phase and its sign. Returns ``(bank command in rad, new state)``.
+
+        Guidance stops (the state freezes but for the ratio filter) once the navigated
+        altitude is below ``chute_altitude_m``."""
+        earth = ctx.model.earth
+        y = nav.y
+        fv = flight_variables(y, earth)
+        ng = jnp.sqrt(nav.drag_mps2**2 + nav.lift_mps2**2) / G0
+        drag_ratio, lift_ratio = self.filter_ratios(state, nav, ng, ctx)
+        model = EntryModel(ctx.model.vehicle, earth, ctx.model.atmosphere, drag_ratio, lift_ratio)
+        target = to_inertial(ctx.target_fixed, t, earth.rotation_rate)
+        v_rel = y.v - jnp.cross(earth.angular_velocity(), y.r)
+        to_go = earth.equatorial_radius_m * along_track_to_go(y.r, v_rel, target)
+        live = ~(fv.altitude_m < self.chute_altitude_m)
+
+        phase, pulled, events = self._phase_events(state, fv, ng, live)
+        bank_offset = jnp.where(
+            events.to_track, self.switch_compensation(fv, to_go), state.bank_offset
+        )
+        res, did_pc = self._corrector_cycle(state, y, t, ctx, model, pulled, live & (phase == 1))
+        sigma_0 = jnp.where(did_pc, res.x, state.sigma_0)
+        chi_switch = jnp.where(did_pc, res.aux, state.predicted_crossrange)
+
+        range_rate = earth.equatorial_radius_m * range_rate_to_target(y.r, v_rel, target)
+        c_l0, c_d0 = ctx.model.vehicle.c_l, ctx.model.vehicle.c_d
+        ld = nav.lift_mps2 / jnp.maximum(nav.drag_mps2, 1e-12)
+        track_mag = self.track(
+            fv.speed_mps,
+            nav.drag_mps2 / G0,
+            fv.hdot_mps,
+            to_go,
+            range_rate,
+            ld / (c_l0 / c_d0),
+            bank_offset,
+        )
+        mag = jnp.where(
+            phase == 0,
+            ctx.hold_bank_rad,
+            jnp.where(
+                phase == 1,
+                self.profile(sigma_0, fv.speed_mps, fv.speed_mps),
+                jnp.where(phase == 2, state.bank_mag, track_mag),
+            ),
+        )
+        chi_now = earth.equatorial_radius_m * crossrange_to_target(y.r, v_rel, target)
+        sign, reverse = self._bank_sign(state, phase, fv, chi_switch, chi_now, live)
+
+        log = self._log(state, y, t, ctx, fv, phase, events, res, did_pc, reverse, live)
+        new = SkipEntryState(
+            phase=phase,
+            pulled_up=pulled,
+            sigma_0=sigma_0,
+            sign=sign,
+            bank_mag=mag,
+            bank_offset=bank_offset,
+            drag_ratio=drag_ratio,
+            lift_ratio=lift_ratio,
+            last_status=jnp.where(did_pc, res.status, state.last_status),
+            predicted_crossrange=chi_switch,
+            step=state.step + 1,
+            log=log,
+        )
+        return sign * mag, new
+
+    def filter_ratios(self, state: SkipEntryState, nav: EntryNav, ng, ctx: EntryGuidanceContext):
+        """Ratios of the measured drag and lift to those of the on-board model at the
+        navigated state, first-order filtered (gain ``ctx.ratio_filter_gain`` per step) while
+        the sensed load ``ng`` exceeds 0.05 g; the predictor scales its model by them."""
+        m = ctx.model
+        drag_model, lift_model = drag_and_lift(nav.y, m.vehicle, m.earth, m.atmosphere)
+        sensing = ng > 0.05
+        k = ctx.ratio_filter_gain
+        drag_ratio = jnp.where(
+            sensing,
+            state.drag_ratio
+            + k * (nav.drag_mps2 / jnp.maximum(drag_model, 1e-12) - state.drag_ratio),
+            state.drag_ratio,
+        )
+        lift_ratio = jnp.where(
+            sensing,
+            state.lift_ratio
+            + k * (nav.lift_mps2 / jnp.maximum(lift_model, 1e-12) - state.lift_ratio),
+            state.lift_ratio,
+        )
+        return drag_ratio, lift_ratio
+
+    def _phase_events(self, state: SkipEntryState, fv: FlightVariables, ng, live):
+        """Phase of this step (hard logic, seed 003 Fig. 1), the pull-up flag and the events."""
+        phase = state.phase
+        start = live & (phase == 0) & (ng > self.ng0_g)
+        phase = jnp.where(start, 1, phase)
+        pulled = state.pulled_up | ((phase >= 1) & (fv.hdot_mps > 0.0))
+        to_kepler = live & (phase == 1) & pulled & (fv.hdot_mps > 0.0) & (ng < self.kepler_load_g)
+        phase = jnp.where(to_kepler, 2, phase)
+        to_track = (
+            live
+            & ((phase == 1) | (phase == 2))
+            & pulled
+            & (fv.hdot_mps < 0.0)
+            & (ng >= self.kepler_load_g)
+        )
+        phase = jnp.where(to_track, 3, phase)
+        return phase, pulled, _PhaseEvents(start, to_kepler, to_track)
+
+    def _corrector_cycle(self, state: SkipEntryState, y, t, ctx, model, pulled, active):
+        """The corrector on a predictor-corrector step (every ``pc_every`` control steps),
+        else the previous solution. Returns the result and whether it is a new solution: only
+        an ``active`` run (in phase 1) does any work."""
+
+        def pc(_):
+            return self.correct(y, t, pulled, state.sigma_0, model, ctx.target_fixed, active)
+
+        def no_pc(_):
+            z = jnp.zeros((), int)
+            return RegulaFalsiResult(
+                x=state.sigma_0,
+                f_x=jnp.zeros(()),
+                converged=jnp.asarray(True),
+                n_evals_early_exit=z,
+                n_evals_total=z,
+                status=z,
+                aux=state.predicted_crossrange,
+                cost=jnp.zeros(()),
+            )
+
+        is_pc_step = (state.step % ctx.pc_every) == 0
+        res = jax.lax.cond(is_pc_step, pc, no_pc, None)
+        return res, is_pc_step & active
+
+    def _bank_sign(self, state: SkipEntryState, phase, fv, chi_switch, chi_now, live):
+        """Sign of the bank and whether it reverses this step.
+
+        The bank reverses when the crossrange leaves the funnel (phases 1 and 3); the first
+        entry judges the crossrange predicted at the switch point, which includes the drift of
+        the rotating Earth under the Kepler arc."""
+        chi = jnp.where(phase == 1, chi_switch, chi_now)
+        want = -jnp.sign(chi)  # negative bank turns left, towards a target on the left
+        threshold = jnp.where(phase == 1, self.switch_crossrange_m, self.funnel_m(fv.speed_mps))
+        outside = (jnp.abs(chi) > threshold) & ((phase == 1) | (phase == 3))
+        reverse = live & outside & (want != state.sign)
+        return jnp.where(reverse, want, state.sign), reverse
+
+    def _log(self, state: SkipEntryState, y, t, ctx, fv, phase, events, res, did_pc, reverse, live):
+        """The diagnostics after this step (see :class:`EntryGuidanceLog`)."""
+        log = state.log
+        evals = jnp.where(did_pc, res.n_evals_early_exit, 0)
+        range_flown = ground_range_m(log.entry_r_m, 0.0, y.r, t, ctx.model.earth)
+        switch = jnp.stack([fv.speed_mps, fv.altitude_m, fv.hdot_mps, range_flown])
+        kepler = (phase == 2) & live
+        return EntryGuidanceLog(
+            predictions=log.predictions + evals,
+            cycle_predictions_max=jnp.maximum(log.cycle_predictions_max, evals),
+            pc_cycles=log.pc_cycles + did_pc,
+            corrector_failures=log.corrector_failures + (did_pc & (res.status != RootStatus.ok)),
+            reversals=log.reversals + reverse,
+            predictor_steps=log.predictor_steps + jnp.where(did_pc, res.cost, 0.0),
+            t_guidance_s=jnp.where(events.start, t, log.t_guidance_s),
+            t_kepler_s=jnp.where(events.to_kepler, t, log.t_kepler_s),
+            t_switch_s=jnp.where(events.to_track, t, log.t_switch_s),
+            switch=jnp.where(events.to_track, switch, log.switch),
+            skip_apogee_m=jnp.where(
+                kepler, jnp.maximum(log.skip_apogee_m, fv.altitude_m), log.skip_apogee_m
+            ),
+            skipped_out=log.skipped_out | (live & (fv.altitude_m > self.skip_out_altitude_m)),
+            entry_r_m=log.entry_r_m,
+            step_predictions=evals,
+            step_miss_m=jnp.where(did_pc, res.f_x, 0.0),
+        )

@@ -8,15 +8,23 @@ the aerodynamics and the atmosphere); the accelerometers measure the actual drag
 from which the guidance filters the ratios of actual to modelled drag and lift that its
 predictor uses. The chute-deploy crossing at 10 km is located inside the step by cubic
 Hermite interpolation.
+
+The simulator holds only the truth (dynamics, actuator, loads and heating, chute crossing), the
+accelerometer measurement and the outcome; the guidance is a member of the
+:class:`~gnc_jax.guidance.entry_common.AbstractEntryGuidance` family, called with
+``init(nav, ctx)`` and ``step(state, nav, t, ctx)`` (``nav`` an
+:class:`~gnc_jax.guidance.entry_common.EntryNav`, ``ctx`` the
+:class:`~gnc_jax.guidance.entry_common.EntryGuidanceContext` of :func:`guidance_context`).
 """
 
+import math
 from typing import NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._status import Status, all_finite
+from .._status import Status
 from .._types import Array, Float, PRNGKeyArray, Scalar, Vector3
 from ..dynamics.atmosphere import Atmosphere
 from ..dynamics.entry import (
@@ -28,7 +36,6 @@ from ..dynamics.entry import (
     EntryConditions,
     EntryState,
     EntryVehicle,
-    aerodynamic_acceleration,
     entry_state_from_conditions,
     entry_vector_field,
     sensed_load_g,
@@ -36,16 +43,16 @@ from ..dynamics.entry import (
 )
 from ..geometry.sphere import (
     along_cross_track,
-    along_track_to_go,
-    crossrange_to_target,
     destination,
-    range_rate_to_target,
     to_earth_fixed,
-    to_inertial,
     unit,
 )
 from ..guidance.entry_common import (
+    AbstractEntryGuidance,
+    EntryGuidanceContext,
     EntryModel,
+    EntryNav,
+    drag_and_lift,
     flight_variables,
     ground_range_m,
     hermite_crossing,
@@ -53,7 +60,8 @@ from ..guidance.entry_common import (
 )
 from ..guidance.skip_entry import SkipEntryGuidance
 from ..integrate import rk4_step
-from ..root_finding import RegulaFalsiResult, RootStatus
+from ..root_finding import RootStatus
+from .base import with_status
 
 
 class CapsuleDispersions(eqx.Module):
@@ -83,6 +91,7 @@ class CapsuleSimulation(eqx.Module):
     target_fixed: Vector3  # unit vector, Earth-fixed
     ratio_filter_gain: Scalar  # per control step, for the measured drag/lift ratios
     hold_bank_rad: Scalar  # attitude held before guidance starts
+    chute_altitude_m: Scalar  # the chute deploys (the flight ends) below it
     dt_s: float = eqx.field(static=True, default=0.5)
     substeps: int = eqx.field(static=True, default=2)  # truth steps per control step
     n_control: int = eqx.field(static=True, default=2400)
@@ -138,42 +147,23 @@ class Trace(NamedTuple):
     lift_ratio: Scalar
 
 
-class _Guidance(NamedTuple):
-    phase: Array  # 0 hold, 1 predictor-corrector, 2 Kepler, 3 tracking, 4 chute
-    pulled_up: Array
-    sigma_0: Scalar
-    sign: Scalar
-    bank_mag: Scalar
-    bank_offset: Scalar
-    drag_ratio: Scalar
-    lift_ratio: Scalar
-    last_status: Array
-    predicted_crossrange: Scalar  # at the switch point, from the last corrector solution
+class _Flight(NamedTuple):
+    """Truth state of the flight, loads and heating, advanced by :func:`_truth_substep`."""
 
-
-class _Carry(NamedTuple):
     y: EntryState
     t: Scalar
     act: BankActuatorState
-    g: _Guidance
-    done: Array
-    chute: EntryState
+    done: Array  # the chute altitude has been crossed
+    chute: EntryState  # state at the crossing
     t_chute: Scalar
-    load_peak: Scalar
-    heat_peak: Scalar
     heat_load: Scalar
-    apogee: Scalar
-    skipped_out: Array
-    switch: Float[Array, "4"]  # speed, altitude, hdot, range flown
-    t_guidance: Scalar
-    t_kepler: Scalar
-    t_switch: Scalar
-    predictions: Array
-    cycle_max: Array
-    pc_cycles: Array
-    failures: Array
-    reversals: Array
-    predictor_steps: Scalar
+    heat_peak: Scalar
+    load_peak: Scalar
+
+
+class _Carry(NamedTuple):
+    flight: _Flight
+    guidance: NamedTuple  # the law's state
 
 
 def dispersed_entry(sim: CapsuleSimulation, key):
@@ -220,331 +210,174 @@ def dispersed_entry(sim: CapsuleSimulation, key):
     return entry_state_from_conditions(cond, sim.earth), truth_vehicle, truth_atm, draws
 
 
-def simulate(sim: CapsuleSimulation, law: SkipEntryGuidance, key: PRNGKeyArray, record=False):
-    """One closed-loop skip entry. Returns ``(CapsuleOutcome, Trace | None)``."""
-    earth = sim.earth
+def guidance_context(sim: CapsuleSimulation) -> EntryGuidanceContext:
+    """The on-board mission data of ``sim``: nominal model, target, hold bank, filter, period."""
+    return EntryGuidanceContext(
+        model=EntryModel(sim.vehicle, sim.earth, sim.atmosphere),
+        target_fixed=sim.target_fixed,
+        hold_bank_rad=sim.hold_bank_rad,
+        ratio_filter_gain=sim.ratio_filter_gain,
+        pc_every=sim.pc_every,
+    )
+
+
+def _truth_substep(sim: CapsuleSimulation, args: EntryArgs, command, f: _Flight) -> _Flight:
+    """Bank actuator and one RK4 step of the truth (``args`` without the bank); the chute
+    crossing is located inside the step by cubic Hermite interpolation. A finished flight
+    (``done``) keeps its state and time."""
+    dt = sim.dt_s
+    earth, vehicle, atmosphere = args.earth, args.vehicle, args.atmosphere
+    act = sim.actuator.step(f.act, command, dt)
+    args = args._replace(bank=act.bank)
+    y1 = rk4_step(entry_vector_field, f.t, f.y, dt, args)
+    f0 = flight_variables(f.y, earth)
+    f1 = flight_variables(y1, earth)
+    cross = ~f.done & (f1.altitude_m < sim.chute_altitude_m)
+    sfrac = hermite_crossing(
+        f0.altitude_m, f0.hdot_mps, f1.altitude_m, f1.hdot_mps, dt, sim.chute_altitude_m
+    )
+    now = hermite_state(
+        f.y,
+        entry_vector_field(f.t, f.y, args).v,
+        y1,
+        entry_vector_field(f.t + dt, y1, args).v,
+        dt,
+        sfrac,
+    )
+    rho = atmosphere.density(f1.altitude_m)
+    q_dot = sutton_graves_heat_rate(rho, f1.speed_mps, vehicle.nose_radius_m)
+    ng1 = sensed_load_g(y1.r, y1.v, vehicle, earth, atmosphere)
+    keep = ~f.done
+    return _Flight(
+        y=jax.tree_util.tree_map(lambda a, b: jnp.where(f.done, a, b), f.y, y1),
+        t=f.t + jnp.where(f.done, 0.0, dt),
+        act=act,
+        done=f.done | cross,
+        chute=jax.tree_util.tree_map(lambda a, b: jnp.where(cross, a, b), now, f.chute),
+        t_chute=jnp.where(cross, f.t + sfrac * dt, f.t_chute),
+        heat_load=f.heat_load + keep * q_dot * dt,
+        heat_peak=jnp.maximum(f.heat_peak, keep * q_dot),
+        load_peak=jnp.maximum(f.load_peak, keep * ng1),
+    )
+
+
+def _trace(y0: EntryState, c: _Carry, nav: EntryNav, command, g, earth) -> Trace:
+    """This control step's trace: the state at its start, the command and the new law state."""
+    y, t = c.flight.y, c.flight.t
+    fv = flight_variables(y, earth)
+    return Trace(
+        t_s=t,
+        altitude_m=fv.altitude_m,
+        speed_mps=fv.speed_mps,
+        range_flown_m=ground_range_m(y0.r, 0.0, y.r, t, earth),
+        bank_cmd_rad=command,
+        bank_rad=c.flight.act.bank,
+        load_g=jnp.sqrt(nav.drag_mps2**2 + nav.lift_mps2**2) / G0,
+        phase=g.phase,
+        sigma_0_rad=g.sigma_0,
+        predicted_miss_m=g.log.step_miss_m,
+        corrector_evals=g.log.step_predictions,
+        r_m=y.r,
+        v_mps=y.v,
+        pulled_up=g.pulled_up,
+        drag_ratio=g.drag_ratio,
+        lift_ratio=g.lift_ratio,
+    )
+
+
+def simulate(sim: CapsuleSimulation, law: AbstractEntryGuidance, key: PRNGKeyArray, record=False):
+    """One closed-loop skip entry. Returns ``(CapsuleOutcome, Trace | None)``.
+
+    Every control step the accelerometers measure the drag and lift of the dispersed vehicle,
+    the law commands a bank from them and the navigated (true) state, and the truth flies
+    ``substeps`` RK4 steps with the bank the actuator achieves."""
     y0, vehicle, atmosphere, draws = dispersed_entry(sim, key)
-    nominal_start = unit(entry_state_from_conditions(sim.entry, earth).r)
-    truth_args = lambda bank: EntryArgs(vehicle, earth, atmosphere, bank)  # noqa: E731
-    c_l0, c_d0 = sim.vehicle.c_l, sim.vehicle.c_d
+    truth = EntryArgs(vehicle, sim.earth, atmosphere, jnp.zeros(()))
+    ctx = guidance_context(sim)
 
-    def measure(y, g: _Guidance):
-        """Perfect navigation plus accelerometers: flight variables, loads, ratios."""
-        fv = flight_variables(y, earth)
-        a_true = aerodynamic_acceleration(y.r, y.v, 0.0, vehicle, earth, atmosphere)
-        v_rel = y.v - jnp.cross(earth.angular_velocity(), y.r)
-        drag = -jnp.dot(a_true, unit(v_rel))
-        lift = jnp.linalg.norm(a_true + drag * unit(v_rel))
-        model = EntryModel(sim.vehicle, earth, sim.atmosphere)
-        a_model = aerodynamic_acceleration(y.r, y.v, 0.0, sim.vehicle, earth, sim.atmosphere)
-        drag_model = -jnp.dot(a_model, unit(v_rel))
-        lift_model = jnp.linalg.norm(a_model + drag_model * unit(v_rel))
-        ng = jnp.sqrt(drag**2 + lift**2) / G0
-        sensing = ng > 0.05
-        k = sim.ratio_filter_gain
-        dr = jnp.where(
-            sensing,
-            g.drag_ratio + k * (drag / jnp.maximum(drag_model, 1e-12) - g.drag_ratio),
-            g.drag_ratio,
+    def measure(y):
+        return EntryNav(y, *drag_and_lift(y, vehicle, sim.earth, atmosphere))
+
+    def control_step(c: _Carry, _):
+        nav = measure(c.flight.y)
+        command, g = law.step(c.guidance, nav, c.flight.t, ctx)
+        flight, _ = jax.lax.scan(
+            lambda f, _: (_truth_substep(sim, truth, command, f), None),
+            c.flight,
+            None,
+            length=sim.substeps,
         )
-        lr = jnp.where(
-            sensing,
-            g.lift_ratio + k * (lift / jnp.maximum(lift_model, 1e-12) - g.lift_ratio),
-            g.lift_ratio,
-        )
-        return fv, ng, drag / G0, lift / jnp.maximum(drag, 1e-12), dr, lr, model
-
-    def control_step(c: _Carry, step):
-        g = c.g
-        fv, ng, ngx, ld, dr, lr, model = measure(c.y, g)
-        model = EntryModel(model.vehicle, earth, model.atmosphere, dr, lr)
-        target = to_inertial(sim.target_fixed, c.t, earth.rotation_rate)
-        v_rel = c.y.v - jnp.cross(earth.angular_velocity(), c.y.r)
-        to_go = earth.equatorial_radius_m * along_track_to_go(c.y.r, v_rel, target)
-        live = ~c.done
-
-        # phase logic (hard)
-        phase = g.phase
-        start = live & (phase == 0) & (ng > law.ng0_g)
-        phase = jnp.where(start, 1, phase)
-        pulled = g.pulled_up | ((phase >= 1) & (fv.hdot_mps > 0.0))
-        to_kepler = live & (phase == 1) & pulled & (fv.hdot_mps > 0.0) & (ng < law.kepler_load_g)
-        phase = jnp.where(to_kepler, 2, phase)
-        to_track = (
-            live
-            & ((phase == 1) | (phase == 2))
-            & pulled
-            & (fv.hdot_mps < 0.0)
-            & (ng >= law.kepler_load_g)
-        )
-        bank_offset = jnp.where(to_track, law.switch_compensation(fv, to_go), g.bank_offset)
-        phase = jnp.where(to_track, 3, phase)
-
-        # predictor-corrector every pc_every steps, only runs in phase 1 do any work
-        def pc(_):
-            return law.correct(
-                c.y, c.t, pulled, g.sigma_0, model, sim.target_fixed, live & (phase == 1)
-            )
-
-        def no_pc(_):
-            z = jnp.zeros((), int)
-            return RegulaFalsiResult(
-                g.sigma_0,
-                jnp.zeros(()),
-                jnp.asarray(True),
-                z,
-                z,
-                z,
-                g.predicted_crossrange,
-                jnp.zeros(()),
-            )
-
-        is_pc_step = (step % sim.pc_every) == 0
-        res = jax.lax.cond(is_pc_step, pc, no_pc, None)
-        did_pc = is_pc_step & live & (phase == 1)
-        sigma_0 = jnp.where(did_pc, res.x, g.sigma_0)
-        last_status = jnp.where(did_pc, res.status, g.last_status)
-        chi_switch = jnp.where(did_pc, res.aux, g.predicted_crossrange)
-
-        # bank magnitude by phase
-        pc_mag = law.profile(sigma_0, fv.speed_mps, fv.speed_mps)
-        range_rate = earth.equatorial_radius_m * range_rate_to_target(c.y.r, v_rel, target)
-        track_mag = law.track(
-            fv.speed_mps, ngx, fv.hdot_mps, to_go, range_rate, ld / (c_l0 / c_d0), bank_offset
-        )
-        mag = jnp.where(
-            phase == 0,
-            sim.hold_bank_rad,
-            jnp.where(phase == 1, pc_mag, jnp.where(phase == 2, g.bank_mag, track_mag)),
-        )
-        # lateral: reverse when the crossrange leaves the funnel (phases 1 and 3); the first
-        # entry judges the crossrange predicted at the switch point, which includes the drift
-        # of the rotating Earth under the Kepler arc
-        chi_now = earth.equatorial_radius_m * crossrange_to_target(c.y.r, v_rel, target)
-        chi = jnp.where(phase == 1, chi_switch, chi_now)
-        want = -jnp.sign(chi)  # negative bank turns left, towards a target on the left
-        threshold = jnp.where(phase == 1, law.switch_crossrange_m, law.funnel_m(fv.speed_mps))
-        outside = (jnp.abs(chi) > threshold) & ((phase == 1) | (phase == 3))
-        reverse = live & outside & (want != g.sign)
-        sign = jnp.where(reverse, want, g.sign)
-        command = sign * mag
-
-        g_new = _Guidance(
-            phase, pulled, sigma_0, sign, mag, bank_offset, dr, lr, last_status, chi_switch
-        )
-
-        # truth: actuator + RK4 substeps, chute crossing located by Hermite interpolation
-        def sub(s, _):
-            y, t, act, done, chute, t_chute, heat_load, heat_peak, load_peak = s
-            act = sim.actuator.step(act, command, sim.dt_s)
-            args = truth_args(act.bank)
-            y1 = rk4_step(entry_vector_field, t, y, sim.dt_s, args)
-            f0 = flight_variables(y, earth)
-            f1 = flight_variables(y1, earth)
-            cross = ~done & (f1.altitude_m < law.chute_altitude_m)
-            sfrac = hermite_crossing(
-                f0.altitude_m,
-                f0.hdot_mps,
-                f1.altitude_m,
-                f1.hdot_mps,
-                sim.dt_s,
-                law.chute_altitude_m,
-            )
-            now = hermite_state(
-                y,
-                entry_vector_field(t, y, args).v,
-                y1,
-                entry_vector_field(t + sim.dt_s, y1, args).v,
-                sim.dt_s,
-                sfrac,
-            )
-            chute = jax.tree_util.tree_map(lambda a, b: jnp.where(cross, a, b), now, chute)
-            t_chute = jnp.where(cross, t + sfrac * sim.dt_s, t_chute)
-            rho = atmosphere.density(f1.altitude_m)
-            q_dot = sutton_graves_heat_rate(rho, f1.speed_mps, vehicle.nose_radius_m)
-            ng1 = sensed_load_g(y1.r, y1.v, vehicle, earth, atmosphere)
-            keep = ~done
-            y = jax.tree_util.tree_map(lambda a, b: jnp.where(done, a, b), y, y1)
-            return (
-                y,
-                t + jnp.where(done, 0.0, sim.dt_s),
-                act,
-                done | cross,
-                chute,
-                t_chute,
-                heat_load + keep * q_dot * sim.dt_s,
-                jnp.maximum(heat_peak, keep * q_dot),
-                jnp.maximum(load_peak, keep * ng1),
-            ), None
-
-        s0 = (c.y, c.t, c.act, c.done, c.chute, c.t_chute, c.heat_load, c.heat_peak, c.load_peak)
-        (y, t, act, done, chute, t_chute, heat_load, heat_peak, load_peak), _ = jax.lax.scan(
-            sub, s0, None, length=sim.substeps
-        )
-
-        range_flown = ground_range_m(y0.r, 0.0, c.y.r, c.t, earth)
-        new = _Carry(
-            y=y,
-            t=t,
-            act=act,
-            g=g_new,
-            done=done,
-            chute=chute,
-            t_chute=t_chute,
-            load_peak=load_peak,
-            heat_peak=heat_peak,
-            heat_load=heat_load,
-            apogee=jnp.where((phase == 2) & live, jnp.maximum(c.apogee, fv.altitude_m), c.apogee),
-            skipped_out=c.skipped_out | (live & (fv.altitude_m > law.skip_out_altitude_m)),
-            switch=jnp.where(
-                to_track,
-                jnp.stack([fv.speed_mps, fv.altitude_m, fv.hdot_mps, range_flown]),
-                c.switch,
-            ),
-            t_guidance=jnp.where(start, c.t, c.t_guidance),
-            t_kepler=jnp.where(to_kepler, c.t, c.t_kepler),
-            t_switch=jnp.where(to_track, c.t, c.t_switch),
-            predictions=c.predictions + jnp.where(did_pc, res.n_evals_early_exit, 0),
-            cycle_max=jnp.maximum(c.cycle_max, jnp.where(did_pc, res.n_evals_early_exit, 0)),
-            pc_cycles=c.pc_cycles + did_pc,
-            failures=c.failures + (did_pc & (res.status != RootStatus.ok)),
-            reversals=c.reversals + reverse,
-            predictor_steps=c.predictor_steps + jnp.where(did_pc, res.cost, 0.0),
-        )
-        rec = None
-        if record:
-            rec = Trace(
-                c.t,
-                fv.altitude_m,
-                fv.speed_mps,
-                range_flown,
-                command,
-                c.act.bank,
-                ng,
-                phase,
-                sigma_0,
-                jnp.where(did_pc, res.f_x, 0.0),
-                jnp.where(did_pc, res.n_evals_early_exit, 0),
-                c.y.r,
-                c.y.v,
-                pulled,
-                dr,
-                lr,
-            )
-        return new, rec
+        rec = _trace(y0, c, nav, command, g, sim.earth) if record else None
+        return _Carry(flight=flight, guidance=g), rec
 
     z = jnp.zeros(())
-    zi = jnp.zeros((), int)
-    g0 = _Guidance(
-        zi,
-        jnp.asarray(False),
-        law.reference.first_entry_bank_rad,
-        jnp.ones(()),
-        sim.hold_bank_rad,
-        z,
-        jnp.ones(()),
-        jnp.ones(()),
-        zi,
-        z,
+    flight = _Flight(
+        y=y0,
+        t=z,
+        act=sim.actuator.init(sim.hold_bank_rad),
+        done=jnp.asarray(False),
+        chute=y0,
+        t_chute=z,
+        heat_load=z,
+        heat_peak=z,
+        load_peak=z,
     )
-    c0 = _Carry(
-        y0,
-        z,
-        sim.actuator.init(sim.hold_bank_rad),
-        g0,
-        jnp.asarray(False),
-        y0,
-        z,
-        z,
-        z,
-        z,
-        z,
-        jnp.asarray(False),
-        jnp.zeros(4),
-        z,
-        z,
-        z,
-        zi,
-        zi,
-        zi,
-        zi,
-        zi,
-        z,
-    )
-    c, rec = jax.lax.scan(control_step, c0, jnp.arange(sim.n_control))
+    c0 = _Carry(flight=flight, guidance=law.init(measure(y0), ctx))
+    c, rec = jax.lax.scan(control_step, c0, None, length=sim.n_control)
+    return _outcome(sim, c, draws), rec
 
-    u_chute = unit(to_earth_fixed(c.chute.r, c.t_chute, earth.rotation_rate))
+
+def _outcome(sim: CapsuleSimulation, c: _Carry, draws) -> CapsuleOutcome:
+    """Chute-point errors against the nominal entry -> target track, loads, the law's log."""
+    earth, f, g = sim.earth, c.flight, c.guidance
+    log = g.log
+    nominal_start = unit(entry_state_from_conditions(sim.entry, earth).r)
+    u_chute = unit(to_earth_fixed(f.chute.r, f.t_chute, earth.rotation_rate))
     along, cross = along_cross_track(u_chute, nominal_start, sim.target_fixed)
     r_e_km = earth.equatorial_radius_m / 1e3
     outcome = CapsuleOutcome(
         status=jnp.zeros((), jnp.int32),
         downrange_err_km=along * r_e_km,
         crossrange_err_km=cross * r_e_km,
-        load_peak_g=c.load_peak,
-        heat_rate_peak_kw_m2=c.heat_peak / 1e3,
-        heat_load_mj_m2=c.heat_load / 1e6,
-        skip_apogee_km=c.apogee / 1e3,
-        switch_speed_mps=c.switch[0],
-        switch_altitude_km=c.switch[1] / 1e3,
-        switch_hdot_mps=c.switch[2],
-        switch_range_km=c.switch[3] / 1e3,
-        bank_offset_deg=jnp.degrees(c.g.bank_offset),
-        predictions=c.predictions,
-        cycle_predictions_max=c.cycle_max,
-        pc_cycles=c.pc_cycles,
-        corrector_failures=c.failures,
-        reversals=c.reversals,
-        predictor_steps=c.predictor_steps,
-        t_guidance_s=c.t_guidance,
-        t_kepler_s=c.t_kepler,
-        t_switch_s=c.t_switch,
-        t_chute_s=c.t_chute,
+        load_peak_g=f.load_peak,
+        heat_rate_peak_kw_m2=f.heat_peak / 1e3,
+        heat_load_mj_m2=f.heat_load / 1e6,
+        skip_apogee_km=log.skip_apogee_m / 1e3,
+        switch_speed_mps=log.switch[0],
+        switch_altitude_km=log.switch[1] / 1e3,
+        switch_hdot_mps=log.switch[2],
+        switch_range_km=log.switch[3] / 1e3,
+        bank_offset_deg=jnp.degrees(g.bank_offset),
+        predictions=log.predictions,
+        cycle_predictions_max=log.cycle_predictions_max,
+        pc_cycles=log.pc_cycles,
+        corrector_failures=log.corrector_failures,
+        reversals=log.reversals,
+        predictor_steps=log.predictor_steps,
+        t_guidance_s=log.t_guidance_s,
+        t_kepler_s=log.t_kepler_s,
+        t_switch_s=log.t_switch_s,
+        t_chute_s=f.t_chute,
         dispersion=draws,
     )
-    finite = all_finite(outcome)
-    status = jnp.where(
-        ~finite,
-        Status.nan,
-        jnp.where(
-            c.skipped_out,
-            Status.skip_out,
-            jnp.where(
-                ~c.done,
-                Status.time_out,
-                jnp.where(c.g.last_status != RootStatus.ok, Status.no_convergence, Status.ok),
-            ),
+    return with_status(
+        outcome,
+        (
+            (log.skipped_out, Status.skip_out),
+            (~f.done, Status.time_out),
+            (g.last_status != RootStatus.ok, Status.no_convergence),
         ),
     )
-    return outcome._replace(status=status.astype(jnp.int32)), rec
 
 
-def build(scenario) -> tuple[CapsuleSimulation, SkipEntryGuidance]:
-    """Simulation data and guidance law of a validated capsule scenario (SI units).
+def _f64(x):
+    return jnp.asarray(x, dtype=jnp.float64)
 
-    The second-entry reference is designed by :mod:`gnc_jax.guidance.reference_design` for the
-    scenario's nominal vehicle, entry and target (cached on disk after the first design).
-    """
-    import math
 
-    from ..guidance.reference_design import NominalProblem, reference_for
-
-    cfg = scenario.config
-    e, v, a, act, dsp, g, ref, s = (
-        cfg[k]
-        for k in (
-            "entry",
-            "vehicle",
-            "atmosphere",
-            "actuator",
-            "dispersions",
-            "guidance",
-            "reference",
-            "simulation",
-        )
-    )
-    f = lambda x: jnp.asarray(x, dtype=jnp.float64)  # noqa: E731
+def _nominal(cfg: dict):
+    """Earth, nominal vehicle and atmosphere, and the nominal entry interface."""
+    e, v, a = cfg["entry"], cfg["vehicle"], cfg["atmosphere"]
     rad = math.radians
-    earth = EarthModel()
     vehicle = EntryVehicle(
         mass_kg=v["mass_kg"],
         reference_area_m2=v["area_m2"],
@@ -556,13 +389,21 @@ def build(scenario) -> tuple[CapsuleSimulation, SkipEntryGuidance]:
         model=a["model"], rho0=a["rho0_kgm3"], scale_height_m=a["scale_height_km"] * 1e3
     )
     entry = EntryConditions(
-        f(e["altitude_km"] * 1e3),
-        f(e["speed_kmps"] * 1e3),
-        f(rad(e["fpa_deg"])),
-        f(rad(e["azimuth_deg"])),
-        f(rad(e["longitude_deg"])),
-        f(rad(e["latitude_deg"])),
+        _f64(e["altitude_km"] * 1e3),
+        _f64(e["speed_kmps"] * 1e3),
+        _f64(rad(e["fpa_deg"])),
+        _f64(rad(e["azimuth_deg"])),
+        _f64(rad(e["longitude_deg"])),
+        _f64(rad(e["latitude_deg"])),
     )
+    return EarthModel(), vehicle, atmosphere, entry
+
+
+def _reference(cfg: dict, earth, vehicle, atmosphere, entry):
+    """The target (unit vector, Earth-fixed) and the designed second-entry reference."""
+    from ..guidance.reference_design import NominalProblem, reference_for
+
+    e, g, ref = cfg["entry"], cfg["guidance"], cfg["reference"]
     y0 = entry_state_from_conditions(entry, earth)
     target = destination(
         unit(y0.r), entry.azimuth, e["range_km"] * 1e3 / float(earth.equatorial_radius_m)
@@ -571,21 +412,28 @@ def build(scenario) -> tuple[CapsuleSimulation, SkipEntryGuidance]:
         model=EntryModel(vehicle, earth, atmosphere),
         entry=y0,
         target_fixed=target,
-        kepler_load_g=f(g["kepler_load_g"]),
-        chute_altitude_m=f(e["chute_altitude_km"] * 1e3),
-        v_end_mps=f(ref["v_end_mps"]),
+        kepler_load_g=_f64(g["kepler_load_g"]),
+        chute_altitude_m=_f64(e["chute_altitude_km"] * 1e3),
+        v_end_mps=_f64(ref["v_end_mps"]),
     )
     description = {
         "entry": e,
-        "vehicle": v,
-        "atmosphere": a,
+        "vehicle": cfg["vehicle"],
+        "atmosphere": cfg["atmosphere"],
         "kepler_load_g": g["kepler_load_g"],
         "v_end_mps": ref["v_end_mps"],
     }
     reference, _ = reference_for(
         problem, description, w_margin=ref["w_margin"], steps=ref["design_steps"]
     )
-    law = SkipEntryGuidance(
+    return target, reference
+
+
+def _law(cfg: dict, reference) -> SkipEntryGuidance:
+    """The skip-entry law of the scenario's ``[guidance]`` section, in SI units."""
+    e, g = cfg["entry"], cfg["guidance"]
+    f, rad = _f64, math.radians
+    return SkipEntryGuidance(
         reference=reference,
         k_drag_load=f(g["k_drag_load"]),
         k_hdot=f(g["k_hdot"]),
@@ -608,7 +456,37 @@ def build(scenario) -> tuple[CapsuleSimulation, SkipEntryGuidance]:
         n_bracket=int(g["n_bracket"]),
         n_iter=int(g["n_iter"]),
     )
+
+
+def _dispersions(dsp: dict) -> CapsuleDispersions:
+    """1-sigma dispersions from the scenario's 3-sigma values (mass: uniform half width)."""
+    f, rad = _f64, math.radians
     three = 1.0 / 3.0
+    return CapsuleDispersions(
+        speed_mps=f(dsp["speed_mps"] * three),
+        fpa_rad=f(rad(dsp["fpa_deg"]) * three),
+        heading_rad=f(rad(dsp["heading_deg"]) * three),
+        downrange_m=f(dsp["downrange_km"] * 1e3 * three),
+        altitude_m=f(dsp["altitude_km"] * 1e3 * three),
+        crossrange_m=f(dsp["crossrange_km"] * 1e3 * three),
+        lift_frac=f(dsp["cl_pct"] / 100 * three),
+        drag_frac=f(dsp["cd_pct"] / 100 * three),
+        density_frac=f(dsp["density_pct"] / 100 * three),
+        mass_frac_half_width=f(dsp["mass_pct"] / 100),
+    )
+
+
+def build(scenario) -> tuple[CapsuleSimulation, SkipEntryGuidance]:
+    """Simulation data and guidance law of a validated capsule scenario (SI units).
+
+    The second-entry reference is designed by :mod:`gnc_jax.guidance.reference_design` for the
+    scenario's nominal vehicle, entry and target (cached on disk after the first design).
+    """
+    cfg = scenario.config
+    e, act, g, s = cfg["entry"], cfg["actuator"], cfg["guidance"], cfg["simulation"]
+    earth, vehicle, atmosphere, entry = _nominal(cfg)
+    target, reference = _reference(cfg, earth, vehicle, atmosphere, entry)
+    rad = math.radians
     sim = CapsuleSimulation(
         entry=entry,
         vehicle=vehicle,
@@ -617,24 +495,14 @@ def build(scenario) -> tuple[CapsuleSimulation, SkipEntryGuidance]:
         actuator=BankActuator(
             max_rate=rad(act["max_rate_dps"]), max_acceleration=rad(act["max_accel_dps2"])
         ),
-        dispersions=CapsuleDispersions(
-            speed_mps=f(dsp["speed_mps"] * three),
-            fpa_rad=f(rad(dsp["fpa_deg"]) * three),
-            heading_rad=f(rad(dsp["heading_deg"]) * three),
-            downrange_m=f(dsp["downrange_km"] * 1e3 * three),
-            altitude_m=f(dsp["altitude_km"] * 1e3 * three),
-            crossrange_m=f(dsp["crossrange_km"] * 1e3 * three),
-            lift_frac=f(dsp["cl_pct"] / 100 * three),
-            drag_frac=f(dsp["cd_pct"] / 100 * three),
-            density_frac=f(dsp["density_pct"] / 100 * three),
-            mass_frac_half_width=f(dsp["mass_pct"] / 100),
-        ),
+        dispersions=_dispersions(cfg["dispersions"]),
         target_fixed=target,
-        ratio_filter_gain=f(g["ratio_filter_gain"]),
-        hold_bank_rad=f(rad(g["hold_bank_deg"])),
+        ratio_filter_gain=_f64(g["ratio_filter_gain"]),
+        hold_bank_rad=_f64(rad(g["hold_bank_deg"])),
+        chute_altitude_m=_f64(e["chute_altitude_km"] * 1e3),
         dt_s=float(s["dt_s"]),
         substeps=int(round(s["control_dt_s"] / s["dt_s"])),
         n_control=int(math.ceil(s["max_time_s"] / s["control_dt_s"])),
         pc_every=int(round(g["pc_period_s"] / s["control_dt_s"])),
     )
-    return sim, law
+    return sim, _law(cfg, reference)

@@ -1,0 +1,113 @@
+"""The capsule law as a member of the entry-guidance family: registry, ratio filter, schedule."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import gnc_jax as gj
+from gnc_jax.dynamics.entry import EntryConditions, entry_state_from_conditions
+from gnc_jax.guidance.base import family_of
+from gnc_jax.guidance.entry_common import (
+    AbstractEntryGuidance,
+    EntryNav,
+    drag_and_lift,
+    flight_variables,
+)
+from gnc_jax.guidance.skip_entry import SkipEntryGuidance
+from gnc_jax.simulation.capsule import build, guidance_context
+
+
+@pytest.fixture(scope="module")
+def law_and_ctx():
+    sim, law = build(gj.load_scenario("lunar-skip-entry"))
+    return sim, law, guidance_context(sim)
+
+
+def state_at(altitude_m, ctx, fpa_deg=-5.0):
+    return entry_state_from_conditions(
+        EntryConditions(altitude_m, 10.0e3, np.radians(fpa_deg), 0.6, 1.0, 0.2), ctx.model.earth
+    )
+
+
+def test_registered_in_the_entry_family():
+    assert family_of(SkipEntryGuidance) is AbstractEntryGuidance
+    assert AbstractEntryGuidance.laws["skip_entry"] is SkipEntryGuidance
+    assert SkipEntryGuidance.law_name == "skip_entry"
+
+
+def test_accelerometer_split_matches_the_aerodynamic_coefficients(law_and_ctx):
+    # Bank 0: drag along -v_rel and lift normal to it, in the ratio C_L / C_D of the vehicle.
+    _, _, ctx = law_and_ctx
+    m = ctx.model
+    drag, lift = drag_and_lift(state_at(60e3, ctx), m.vehicle, m.earth, m.atmosphere)
+    assert float(drag) > 0.0
+    np.testing.assert_allclose(float(lift / drag), float(m.vehicle.c_l / m.vehicle.c_d), rtol=1e-12)
+
+
+def test_ratio_filter_is_first_order_towards_the_measured_ratios(law_and_ctx):
+    """n filter steps on constant measurements: ratio_n = r + (1 - k)^n (1 - r)."""
+    _, law, ctx = law_and_ctx
+    y = state_at(60e3, ctx)
+    m = ctx.model
+    drag, lift = drag_and_lift(y, m.vehicle, m.earth, m.atmosphere)
+    nav = EntryNav(y, 1.3 * drag, 0.8 * lift)
+    state = law.init(nav, ctx)
+    ng = jnp.sqrt(nav.drag_mps2**2 + nav.lift_mps2**2) / 9.80665
+    assert float(ng) > 0.05
+    n = 7
+    for _ in range(n):
+        dr, lr = law.filter_ratios(state, nav, ng, ctx)
+        state = state._replace(drag_ratio=dr, lift_ratio=lr)
+    decay = (1.0 - float(ctx.ratio_filter_gain)) ** n
+    np.testing.assert_allclose(float(state.drag_ratio), 1.3 + decay * (1.0 - 1.3), rtol=1e-12)
+    np.testing.assert_allclose(float(state.lift_ratio), 0.8 + decay * (1.0 - 0.8), rtol=1e-12)
+    # Below 0.05 g the ratios are not updated.
+    low = nav._replace(drag_mps2=1e-3 * drag, lift_mps2=1e-3 * lift)
+    assert law.filter_ratios(state, low, jnp.asarray(0.01), ctx) == (
+        state.drag_ratio,
+        state.lift_ratio,
+    )
+
+
+def test_guidance_holds_then_runs_the_corrector_every_pc_every_steps(law_and_ctx):
+    """Hold phase below ng0; once guiding (phase 1) the corrector runs on steps 0, p, 2p, ..."""
+    _, law, ctx = law_and_ctx
+    m = ctx.model
+    step = jax.jit(lambda s, nav, t, ctx: law.step(s, nav, t, ctx))
+
+    def nav_at(y):
+        return EntryNav(y, *drag_and_lift(y, m.vehicle, m.earth, m.atmosphere))
+
+    high = nav_at(state_at(119e3, ctx))  # almost no load: hold
+    state = law.init(high, ctx)
+    command, held = step(state, high, 0.0, ctx)
+    assert int(held.phase) == 0 and float(command) == float(ctx.hold_bank_rad)
+    assert int(held.log.pc_cycles) == 0
+
+    y = state_at(65e3, ctx, fpa_deg=-6.0)
+    nav = nav_at(y)
+    n_steps = 2 * ctx.pc_every + 1
+    cycles = []
+    state = law.init(nav, ctx)
+    for k in range(n_steps):
+        _, state = step(state, nav, 10.0 + k, ctx)
+        assert int(state.phase) == 1
+        cycles.append(int(state.log.pc_cycles))
+    expected = [k // ctx.pc_every + 1 for k in range(n_steps)]
+    assert cycles == expected
+    assert int(state.log.predictions) >= len(set(expected))
+    assert float(state.log.t_guidance_s) == 10.0
+
+
+def test_guidance_stops_below_the_chute_altitude(law_and_ctx):
+    _, law, ctx = law_and_ctx
+    m = ctx.model
+    y = state_at(float(law.chute_altitude_m) - 10.0, ctx, fpa_deg=-60.0)
+    assert float(flight_variables(y, m.earth).altitude_m) < float(law.chute_altitude_m)
+    nav = EntryNav(y, *drag_and_lift(y, m.vehicle, m.earth, m.atmosphere))
+    state = law.init(nav, ctx)
+    _, new = law.step(state, nav, 0.0, ctx)
+    assert int(new.phase) == 0  # a load far above ng0 does not start guidance
+    assert int(new.log.pc_cycles) == 0 and int(new.log.reversals) == 0
+    assert not bool(new.log.skipped_out)
