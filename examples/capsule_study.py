@@ -25,7 +25,9 @@ print(gj.report("results/example-skip-entry"))
 # 2. Sweep the range gain of the second-entry tracking law (same draws for every value; a new
 #    gain reuses the compiled executable).
 for k_range in (1.5, 2.0, 2.5, 3.0):
-    t = gj.run_study(scenario.with_overrides({"guidance.k_range": k_range}), runs=300, seed=1)
+    t = gj.run_study(
+        scenario.with_overrides({"guidance.skip_entry.k_range": k_range}), runs=300, seed=1
+    )
     o = t.outcomes
     print(
         f"k_range = {k_range}: downrange std {np.std(o['downrange_err_km']):.3f} km, "

@@ -39,9 +39,16 @@ class ParamSpec:
     toml: str  # file name of the field ("" = the attribute's name)
     scale: float  # SI = file value x scale
     derived: bool = False  # SI value depends on other fields: the owner's from_config converts
+    convert: Any = None  # file value -> SI value, when not a plain factor
+    static: bool = False  # a static field (ints, strings, and floats declared static)
 
     def to_si(self, value):
         kind = self.field.kind
+        if self.convert is not None:
+            value = self.convert(value)
+            return float(value) if self.static else jnp.asarray(value, dtype=jnp.float64)
+        if kind == "float" and self.static:
+            return float(value * self.scale)
         if kind == "floats":
             return jnp.asarray(value, dtype=jnp.float64) * self.scale
         if kind == "float":
@@ -80,6 +87,8 @@ def param(
     min_length: int = 0,
     kind: str | None = None,
     si_default=None,
+    convert=None,
+    static: bool = False,
 ):
     """A Module field declared with its scenario field (see the module docstring).
 
@@ -95,6 +104,9 @@ def param(
             strings are static fields (they decide shapes or branches); bools become 0/1 floats.
         si_default: the Module's SI default when the conversion is not a constant factor
             (it depends on other scenario fields; the owner converts in its ``from_config``).
+        convert: ``file value -> SI value`` when a single factor would not reproduce the
+            arithmetic of the unit conversion exactly (e.g. ``x * 1e3 / 1e6``).
+        static: keep a float as a static Python float (a step size that shapes a loop).
     """
     kind = kind or _kind_of(default)
     if kind == "float":
@@ -104,9 +116,11 @@ def param(
         toml,
         scale,
         si_default is not None,
+        convert,
+        static or kind in ("int", "str"),
     )
     meta = {_KEY: spec}
-    static = kind in ("int", "str")
+    static = spec.static
     si = spec.to_si(default) if si_default is None else jnp.asarray(si_default, jnp.float64)
     if kind == "floats":
         return eqx.field(default_factory=lambda: spec.to_si(default), metadata=meta)

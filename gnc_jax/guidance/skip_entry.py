@@ -31,6 +31,7 @@ event times, switch state, skip apogee, skip-out) accumulate in the state's ``lo
 corrector diagnostics for the trace.
 """
 
+import math
 from typing import NamedTuple
 
 import equinox as eqx
@@ -38,7 +39,7 @@ import jax
 import jax.numpy as jnp
 
 from .._types import Array, Float, Scalar
-from ..dynamics.entry import G0, EntryState
+from ..dynamics.entry import G0, EntryState, entry_state_from_conditions
 from ..geometry.sphere import (
     along_cross_track,
     along_track_to_go,
@@ -49,7 +50,9 @@ from ..geometry.sphere import (
     unit,
 )
 from ..integrate import rk4_step
+from ..params import from_config, param
 from ..root_finding import RegulaFalsiResult, RootStatus, bounded_regula_falsi_with_aux
+from ..scenario.schema import ScenarioError
 from .base import register_law
 from .entry_common import (
     AbstractEntryGuidance,
@@ -63,6 +66,8 @@ from .entry_common import (
     ground_range_m,
     hermite_crossing,
 )
+
+DEG = math.pi / 180.0  # math.radians(x) is x * DEG to the last bit
 
 
 class ReferenceTrajectory(eqx.Module):
@@ -234,26 +239,155 @@ class SkipEntryGuidance(AbstractEntryGuidance):
     """
 
     reference: ReferenceTrajectory
-    k_drag_load: Scalar
-    k_hdot: Scalar
-    k_range: Scalar
-    k_range_rate: Scalar
-    ng0_g: Scalar
-    kepler_load_g: Scalar
-    bracket_step_rad: Scalar
-    range_tolerance_m: Scalar
-    bank_min_rad: Scalar
-    bank_max_rad: Scalar
-    skip_out_altitude_m: Scalar
-    funnel_base_m: Scalar
-    funnel_quadratic_s2_m: Scalar
-    switch_crossrange_m: Scalar
-    track_bank_min_rad: Scalar
     chute_altitude_m: Scalar
-    predictor_dt_s: float = eqx.field(static=True, default=2.0)
-    predictor_max_steps: int = eqx.field(static=True, default=1000)
-    n_bracket: int = eqx.field(static=True, default=6)
-    n_iter: int = eqx.field(static=True, default=6)
+    k_drag_load: Scalar = param(
+        1.0, lo=0.0, hi=100.0, doc="eq. 7: weight of the drag-load term of the predicted range"
+    )
+    k_hdot: Scalar = param(
+        1.0, lo=0.0, hi=100.0, doc="eq. 7: weight of the Ḣ term of the predicted range"
+    )
+    k_range: Scalar = param(
+        2.5, lo=0.0, hi=100.0, doc="eq. 7: overall gain on the range deviation (1 = dead-beat)"
+    )
+    k_range_rate: Scalar = param(
+        0.5, lo=0.0, hi=100.0, doc="eq. 7: weight of the range-rate term of the predicted range"
+    )
+    ng0_g: Scalar = param(
+        0.1, lo=0.0, lo_open=True, hi=5.0, units="g", doc="load that ends the attitude hold"
+    )
+    kepler_load_g: Scalar = param(
+        0.2, lo=0.0, lo_open=True, hi=5.0, units="g", doc="Kepler-phase load threshold"
+    )
+    bracket_step_rad: Scalar = param(
+        5.0,
+        toml="bracket_step_deg",
+        scale=DEG,
+        lo=0.01,
+        hi=90.0,
+        units="deg",
+        doc="Δσ of eq. 15",
+    )
+    range_tolerance_m: Scalar = param(
+        5.0,
+        toml="range_tolerance_km",
+        scale=1e3,
+        lo=0.001,
+        hi=1000.0,
+        units="km",
+        doc="corrector tolerance on the predicted range error",
+    )
+    bank_min_rad: Scalar = param(
+        0.0,
+        toml="bank_min_deg",
+        scale=DEG,
+        lo=0.0,
+        hi=180.0,
+        units="deg",
+        doc="corrector's smallest bank",
+    )
+    bank_max_rad: Scalar = param(
+        180.0,
+        toml="bank_max_deg",
+        scale=DEG,
+        lo=0.0,
+        hi=180.0,
+        units="deg",
+        doc="corrector's largest bank",
+    )
+    skip_out_altitude_m: Scalar = param(
+        300.0,
+        toml="skip_out_altitude_km",
+        scale=1e3,
+        lo=130.0,
+        hi=1e5,
+        units="km",
+        doc="a prediction climbing above it counts as a skip-out",
+    )
+    funnel_base_m: Scalar = param(
+        0.5,
+        toml="funnel_base_km",
+        scale=1e3,
+        lo=0.0,
+        hi=1e3,
+        units="km",
+        doc="crossrange funnel half-width at zero speed",
+    )
+    funnel_quadratic_s2_m: Scalar = param(
+        0.6,
+        toml="funnel_quadratic_km",
+        convert=lambda x: x * 1e3 / 1e6,
+        lo=0.0,
+        hi=1e3,
+        units="km/(km/s)^2",
+        doc="funnel half-width = base + quadratic * speed^2",
+    )
+    switch_crossrange_m: Scalar = param(
+        40.0,
+        toml="switch_crossrange_km",
+        scale=1e3,
+        lo=0.0,
+        hi=1e3,
+        units="km",
+        doc="first-entry reversal threshold on the crossrange predicted at the switch point",
+    )
+    track_bank_min_rad: Scalar = param(
+        15.0,
+        toml="track_bank_min_deg",
+        scale=DEG,
+        lo=0.0,
+        hi=89.0,
+        units="deg",
+        doc="second entry: smallest commanded bank magnitude",
+    )
+    predictor_dt_s: float = param(
+        8.0,
+        lo=0.01,
+        hi=60.0,
+        units="s",
+        static=True,
+        doc="RK4 step of the predictor (see benchmarks/entry_integrators.py)",
+    )
+    predictor_max_steps: int = param(1000, lo=10, hi=100000, doc="predictor step budget")
+    n_bracket: int = param(6, lo=1, hi=100, doc="bracketing steps of the corrector")
+    n_iter: int = param(6, lo=1, hi=100, doc="regula-falsi iterations of the corrector")
+
+    @classmethod
+    def check(cls, section, config):
+        if section["bank_min_deg"] >= section["bank_max_deg"]:
+            raise ScenarioError(
+                "guidance.skip_entry.bank_min_deg: must be < guidance.skip_entry.bank_max_deg"
+            )
+
+    @classmethod
+    def from_config(cls, section, config, ctx=None):
+        """The law of a scenario, with the second-entry reference designed by
+        :mod:`gnc_jax.guidance.reference_design` for ``ctx`` (the capsule simulation data: the
+        nominal vehicle, Earth, atmosphere, entry and target; cached on disk after the first
+        design). The chute altitude is the entry's (``entry.chute_altitude_km``)."""
+        # imported here: reference_design imports ReferenceTrajectory from this module
+        from .reference_design import NominalProblem, reference_for
+
+        e, ref = config["entry"], config["reference"]
+        chute = jnp.asarray(e["chute_altitude_km"] * 1e3, dtype=jnp.float64)
+        problem = NominalProblem(
+            model=EntryModel(ctx.vehicle, ctx.earth, ctx.atmosphere),
+            entry=entry_state_from_conditions(ctx.entry, ctx.earth),
+            target_fixed=ctx.target_fixed,
+            kepler_load_g=jnp.asarray(section["kepler_load_g"], dtype=jnp.float64),
+            chute_altitude_m=chute,
+            v_end_mps=jnp.asarray(ref["v_end_mps"], dtype=jnp.float64),
+        )
+        description = {
+            "entry": e,
+            "vehicle": config["vehicle"],
+            "atmosphere": config["atmosphere"],
+            "kepler_load_g": section["kepler_load_g"],
+            "v_end_mps": ref["v_end_mps"],
+        }
+        reference, _ = reference_for(
+            problem, description, w_margin=ref["w_margin"], steps=ref["design_steps"]
+        )
+        return from_config(cls, section, reference=reference, chute_altitude_m=chute)
 
     # ---- predictor (seed 003 §3.1) ----
     def profile(self, sigma_0, v_0, speed):

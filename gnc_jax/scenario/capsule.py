@@ -70,16 +70,6 @@ SCHEMA = {
         ),
     },
     "guidance": {
-        "ng0_g": F(
-            "float",
-            0.1,
-            lo=0.0,
-            lo_open=True,
-            hi=5.0,
-            units="g",
-            doc="load that ends the attitude hold",
-        ),
-        "kepler_load_g": F("float", 0.2, lo=0.0, lo_open=True, hi=5.0, units="g"),
         "hold_bank_deg": F("float", 60.0, lo=0.0, hi=180.0, units="deg"),
         "pc_period_s": F(
             "float",
@@ -89,78 +79,6 @@ SCHEMA = {
             hi=120.0,
             units="s",
             doc="predictor-corrector cycle; a multiple of simulation.control_dt_s",
-        ),
-        "predictor_dt_s": F(
-            "float",
-            8.0,
-            lo=0.01,
-            hi=60.0,
-            units="s",
-            doc="RK4 step of the predictor (see benchmarks/entry_integrators.py)",
-        ),
-        "predictor_max_steps": F("int", 1000, lo=10, hi=100000),
-        "bracket_step_deg": F("float", 5.0, lo=0.01, hi=90.0, units="deg", doc="Δσ of eq. 15"),
-        "n_bracket": F("int", 6, lo=1, hi=100),
-        "n_iter": F("int", 6, lo=1, hi=100),
-        "range_tolerance_km": F(
-            "float",
-            5.0,
-            lo=0.001,
-            hi=1000.0,
-            units="km",
-            doc="corrector tolerance on the predicted range error",
-        ),
-        "bank_min_deg": F("float", 0.0, lo=0.0, hi=180.0, units="deg"),
-        "bank_max_deg": F("float", 180.0, lo=0.0, hi=180.0, units="deg"),
-        "skip_out_altitude_km": F("float", 300.0, lo=130.0, hi=1e5, units="km"),
-        "k_range": F(
-            "float",
-            2.5,
-            lo=0.0,
-            hi=100.0,
-            doc="eq. 7: overall gain on the range deviation (1 = dead-beat)",
-        ),
-        "k_drag_load": F(
-            "float",
-            1.0,
-            lo=0.0,
-            hi=100.0,
-            doc="eq. 7: weight of the drag-load term of the predicted range",
-        ),
-        "k_hdot": F(
-            "float", 1.0, lo=0.0, hi=100.0, doc="eq. 7: weight of the Ḣ term of the predicted range"
-        ),
-        "k_range_rate": F(
-            "float",
-            0.5,
-            lo=0.0,
-            hi=100.0,
-            doc="eq. 7: weight of the range-rate term of the predicted range",
-        ),
-        "track_bank_min_deg": F(
-            "float",
-            15.0,
-            lo=0.0,
-            hi=89.0,
-            units="deg",
-            doc="second entry: smallest commanded bank magnitude",
-        ),
-        "switch_crossrange_km": F(
-            "float",
-            40.0,
-            lo=0.0,
-            hi=1e3,
-            units="km",
-            doc="first-entry reversal threshold on the crossrange predicted at the switch point",
-        ),
-        "funnel_base_km": F("float", 0.5, lo=0.0, hi=1e3, units="km"),
-        "funnel_quadratic_km": F(
-            "float",
-            0.6,
-            lo=0.0,
-            hi=1e3,
-            units="km/(km/s)^2",
-            doc="funnel half-width = base + quadratic * speed^2",
         ),
         "ratio_filter_gain": F(
             "float", 0.2, lo=0.0, hi=1.0, doc="fading-memory gain of the drag/lift ratio estimates"
@@ -202,8 +120,6 @@ def _multiple(a, b):
 def check(cfg: dict) -> None:
     """Cross-field checks of a validated capsule configuration."""
     g, s = cfg["guidance"], cfg["simulation"]
-    if g["bank_min_deg"] >= g["bank_max_deg"]:
-        raise ScenarioError("guidance.bank_min_deg: must be < guidance.bank_max_deg")
     if not _multiple(s["control_dt_s"], s["dt_s"]):
         raise ScenarioError(
             f"simulation.control_dt_s: {s['control_dt_s']:g} s; allowed: a whole multiple of "
@@ -214,5 +130,3 @@ def check(cfg: dict) -> None:
             f"guidance.pc_period_s: {g['pc_period_s']:g} s; allowed: a whole multiple of "
             f"simulation.control_dt_s = {s['control_dt_s']:g} s"
         )
-    if g["kepler_load_g"] <= 0 or g["ng0_g"] <= 0:
-        raise ScenarioError("guidance.ng0_g: allowed: > 0")

@@ -58,7 +58,6 @@ from ..guidance.entry_common import (
     hermite_crossing,
     hermite_state,
 )
-from ..guidance.skip_entry import SkipEntryGuidance
 from ..integrate import rk4_step
 from ..root_finding import RootStatus
 from .base import with_status
@@ -399,62 +398,11 @@ def _nominal(cfg: dict):
     return EarthModel(), vehicle, atmosphere, entry
 
 
-def _reference(cfg: dict, earth, vehicle, atmosphere, entry):
-    """The target (unit vector, Earth-fixed) and the designed second-entry reference."""
-    from ..guidance.reference_design import NominalProblem, reference_for
-
-    e, g, ref = cfg["entry"], cfg["guidance"], cfg["reference"]
+def _target(cfg: dict, earth, entry) -> Vector3:
+    """The target (unit vector, Earth-fixed): ``entry.range_km`` along the entry azimuth."""
     y0 = entry_state_from_conditions(entry, earth)
-    target = destination(
-        unit(y0.r), entry.azimuth, e["range_km"] * 1e3 / float(earth.equatorial_radius_m)
-    )
-    problem = NominalProblem(
-        model=EntryModel(vehicle, earth, atmosphere),
-        entry=y0,
-        target_fixed=target,
-        kepler_load_g=_f64(g["kepler_load_g"]),
-        chute_altitude_m=_f64(e["chute_altitude_km"] * 1e3),
-        v_end_mps=_f64(ref["v_end_mps"]),
-    )
-    description = {
-        "entry": e,
-        "vehicle": cfg["vehicle"],
-        "atmosphere": cfg["atmosphere"],
-        "kepler_load_g": g["kepler_load_g"],
-        "v_end_mps": ref["v_end_mps"],
-    }
-    reference, _ = reference_for(
-        problem, description, w_margin=ref["w_margin"], steps=ref["design_steps"]
-    )
-    return target, reference
-
-
-def _law(cfg: dict, reference) -> SkipEntryGuidance:
-    """The skip-entry law of the scenario's ``[guidance]`` section, in SI units."""
-    e, g = cfg["entry"], cfg["guidance"]
-    f, rad = _f64, math.radians
-    return SkipEntryGuidance(
-        reference=reference,
-        k_drag_load=f(g["k_drag_load"]),
-        k_hdot=f(g["k_hdot"]),
-        k_range=f(g["k_range"]),
-        k_range_rate=f(g["k_range_rate"]),
-        ng0_g=f(g["ng0_g"]),
-        kepler_load_g=f(g["kepler_load_g"]),
-        bracket_step_rad=f(rad(g["bracket_step_deg"])),
-        range_tolerance_m=f(g["range_tolerance_km"] * 1e3),
-        bank_min_rad=f(rad(g["bank_min_deg"])),
-        bank_max_rad=f(rad(g["bank_max_deg"])),
-        skip_out_altitude_m=f(g["skip_out_altitude_km"] * 1e3),
-        funnel_base_m=f(g["funnel_base_km"] * 1e3),
-        funnel_quadratic_s2_m=f(g["funnel_quadratic_km"] * 1e3 / 1e6),
-        switch_crossrange_m=f(g["switch_crossrange_km"] * 1e3),
-        track_bank_min_rad=f(rad(g["track_bank_min_deg"])),
-        chute_altitude_m=f(e["chute_altitude_km"] * 1e3),
-        predictor_dt_s=float(g["predictor_dt_s"]),
-        predictor_max_steps=int(g["predictor_max_steps"]),
-        n_bracket=int(g["n_bracket"]),
-        n_iter=int(g["n_iter"]),
+    return destination(
+        unit(y0.r), entry.azimuth, cfg["entry"]["range_km"] * 1e3 / float(earth.equatorial_radius_m)
     )
 
 
@@ -476,16 +424,14 @@ def _dispersions(dsp: dict) -> CapsuleDispersions:
     )
 
 
-def build(scenario) -> tuple[CapsuleSimulation, SkipEntryGuidance]:
-    """Simulation data and guidance law of a validated capsule scenario (SI units).
-
-    The second-entry reference is designed by :mod:`gnc_jax.guidance.reference_design` for the
-    scenario's nominal vehicle, entry and target (cached on disk after the first design).
-    """
+def build(scenario) -> CapsuleSimulation:
+    """Simulation data of a validated capsule scenario (SI units); the law (with the reference
+    it designs for this vehicle, entry and target) is built by the system from
+    ``[guidance.<law>]``."""
     cfg = scenario.config
     e, act, g, s = cfg["entry"], cfg["actuator"], cfg["guidance"], cfg["simulation"]
     earth, vehicle, atmosphere, entry = _nominal(cfg)
-    target, reference = _reference(cfg, earth, vehicle, atmosphere, entry)
+    target = _target(cfg, earth, entry)
     rad = math.radians
     sim = CapsuleSimulation(
         entry=entry,
@@ -505,4 +451,4 @@ def build(scenario) -> tuple[CapsuleSimulation, SkipEntryGuidance]:
         n_control=int(math.ceil(s["max_time_s"] / s["control_dt_s"])),
         pc_every=int(round(g["pc_period_s"] / s["control_dt_s"])),
     )
-    return sim, _law(cfg, reference)
+    return sim

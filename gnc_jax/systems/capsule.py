@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._status import Status
+from ..guidance.entry_common import AbstractEntryGuidance
 from ..montecarlo import simulate_traces
 from ..plotting import ellipse_xy, pyplot, saver
 from ..scenario import capsule as capsule_scenario
@@ -208,11 +209,13 @@ class CapsuleSystem(AbstractSystem):
     name = "capsule"
     description = "lunar-return skip entry: predictor-corrector and reference tracking"
     sections = capsule_scenario.SCHEMA
+    law_family = AbstractEntryGuidance
+    default_law = "skip_entry"
     tunable = (
-        "guidance.k_drag_load",
-        "guidance.k_hdot",
-        "guidance.k_range",
-        "guidance.k_range_rate",
+        "guidance.skip_entry.k_drag_load",
+        "guidance.skip_entry.k_hdot",
+        "guidance.skip_entry.k_range",
+        "guidance.skip_entry.k_range_rate",
     )
     metrics = ("downrange_err_km", "crossrange_err_km", "load_peak_g_max", "predictions_mean")
     paper_labels: ClassVar[dict[str, str]] = {
@@ -238,7 +241,8 @@ class CapsuleSystem(AbstractSystem):
         capsule_scenario.check(config)
 
     def build(self, scenario):
-        return capsule_sim.build(scenario)
+        sim = capsule_sim.build(scenario)
+        return sim, self.build_law(scenario.config, sim)
 
     def simulate(self, params, law, key, record=False):
         return capsule_sim.simulate(params, law, key, record=record)

@@ -15,12 +15,12 @@ from gnc_jax.guidance.entry_common import (
     flight_variables,
 )
 from gnc_jax.guidance.skip_entry import SkipEntryGuidance
-from gnc_jax.simulation.capsule import build, guidance_context
+from gnc_jax.simulation.capsule import guidance_context
 
 
 @pytest.fixture(scope="module")
 def law_and_ctx():
-    sim, law = build(gj.load_scenario("lunar-skip-entry"))
+    sim, law = gj.build(gj.load_scenario("lunar-skip-entry"))
     return sim, law, guidance_context(sim)
 
 

@@ -91,9 +91,9 @@ def test_downrange_gradient_wrt_tracking_gains_matches_finite_differences(capsul
     and most runs must qualify."""
     import equinox as eqx
 
-    from gnc_jax.simulation.capsule import build, simulate
+    from gnc_jax.simulation.capsule import simulate
 
-    sim, law = build(capsule_scenario)
+    sim, law = gj.build(capsule_scenario)
     names = ("k_range", "k_drag_load", "k_hdot", "k_range_rate")
 
     def downrange(gains, i):
