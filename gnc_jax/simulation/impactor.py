@@ -368,6 +368,24 @@ def simulate(
     return with_status(_outcome(sim, carry, draws)), flatten_trace(rec)
 
 
+def errors_from_config(er: dict, nv: dict) -> ImpactorErrors:
+    """The :class:`ImpactorErrors` of validated ``[errors]`` and ``[navigation]`` sections (SI)."""
+    f = lambda x: jnp.asarray(x, dtype=jnp.float64)  # noqa: E731
+    urad, ug = 1e-6, 1e-6 * G0
+    return ImpactorErrors(
+        delivery_position_m=f(er["delivery_position_km"] * 1e3),
+        knowledge_position_m=f(nv["knowledge_position_km"]) * 1e3,
+        knowledge_velocity_mps=f(nv["knowledge_velocity_mps"]),
+        image_processing_rad=f(er["image_processing_urad"] * urad),
+        attitude_control_rad=f(er["attitude_control_urad"] * urad),
+        attitude_bias_rad=f(er["attitude_bias_urad"] * urad),
+        attitude_noise_rad=f(er["attitude_noise_urad"] * urad),
+        accel_bias_mps2=f(er["accel_bias_ug"] * ug),
+        accel_noise_mps2=f(er["accel_noise_ug"] * ug),
+        burn_magnitude_frac=f(er["burn_magnitude_pct"] / 100.0),
+    )
+
+
 def build(scenario) -> tuple[ImpactorSimulation, AbstractImpactorGuidance]:
     """Simulation data and guidance law of a validated impactor :class:`Scenario` (SI units)."""
     from ..guidance.los import LOSSwitchingCurveGuidance
@@ -414,19 +432,7 @@ def build(scenario) -> tuple[ImpactorSimulation, AbstractImpactorGuidance]:
         dt_s=float(g["dt_s"]),
         image_interval_s=float(image_dt),
     )
-    urad, ug = 1e-6, 1e-6 * G0
-    errors = ImpactorErrors(
-        delivery_position_m=f(er["delivery_position_km"] * 1e3),
-        knowledge_position_m=f(nv["knowledge_position_km"]) * 1e3,
-        knowledge_velocity_mps=f(nv["knowledge_velocity_mps"]),
-        image_processing_rad=f(er["image_processing_urad"] * urad),
-        attitude_control_rad=f(er["attitude_control_urad"] * urad),
-        attitude_bias_rad=f(er["attitude_bias_urad"] * urad),
-        attitude_noise_rad=f(er["attitude_noise_urad"] * urad),
-        accel_bias_mps2=f(er["accel_bias_ug"] * ug),
-        accel_noise_mps2=f(er["accel_noise_ug"] * ug),
-        burn_magnitude_frac=f(er["burn_magnitude_pct"] / 100.0),
-    )
+    errors = errors_from_config(er, nv)
     sim = ImpactorSimulation(
         r0_m=r0,
         v0_mps=v0,
