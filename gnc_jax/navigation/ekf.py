@@ -95,9 +95,7 @@ def ekf_update(
     ikh = jnp.eye(nav.x.shape[0]) - k @ hj
     p = ikh @ nav.p @ ikh.T + k @ r_meas @ k.T
     p = 0.5 * (p + p.T)
-    updated = NavEstimate(x, p)
-    if valid is not True:
-        updated = jax.tree_util.tree_map(lambda a, b: jnp.where(valid, a, b), updated, nav)
+    updated = jax.tree_util.tree_map(lambda a, b: jnp.where(valid, a, b), NavEstimate(x, p), nav)
     return updated, innovation
 
 

@@ -61,7 +61,7 @@ class ImpactorErrors(eqx.Module):
         default_factory=lambda: jnp.array([150e3, 8e3, 8e3])
     )  # along the B-plane axes (S, T, R)
     knowledge_velocity_mps: Scalar = 0.1
-    image_processing_rad: Scalar = 10e-6
+    image_processing_rad: Scalar = 10e-6  # the filter's model; the front end has its own
     attitude_control_rad: Scalar = 320e-6
     attitude_bias_rad: Scalar = 100e-6
     attitude_noise_rad: Scalar = 30e-6

@@ -10,14 +10,15 @@ centre).
 
 Navigation (seed 004 Table 4 knowledge errors): the paper's Monte Carlo uses initial position
 knowledge (100, 10) km, velocity knowledge 0.1 m/s and a 320 urad attitude measurement error,
-but does not describe its navigation. gnc_jax closes the loop with the existing camera + EKF
-chain (navigation/camera.py, navigation/ekf.py): the filter starts from the knowledge errors
-(drawn per run, along / across the initial LOS), takes the target's LOS angles at every
-guidance step (the paper's loop recomputes the LOS at every step, Fig. 4) with the attitude
-error as white angle noise, and predicts with straight-line motion plus the modelled
-differential gravity and the executed Δv (no accelerometer error in Table 4). The same
-attitude error tilts each firing's thrust. ``navigation.model = "perfect"`` feeds the law the
-true state (the paper's error-free Table 3 runs).
+but does not describe its navigation. gnc_jax closes the loop with the impactor's camera,
+LOS front end and EKF (navigation/camera.py, navigation/measurements/gaussian.py,
+navigation/ekf.py): the filter starts from the knowledge errors (drawn per run, along / across
+the initial LOS), takes the target's LOS angles at every guidance step (the paper's loop
+recomputes the LOS at every step, Fig. 4) with the attitude error as white angle noise, and
+predicts with straight-line motion plus the modelled differential gravity and the executed Δv
+(no accelerometer error in Table 4). The same attitude error tilts each firing's thrust.
+``navigation.model = "perfect"`` feeds the law the true state (the paper's error-free Table 3
+runs).
 """
 
 import functools
