@@ -18,16 +18,15 @@ Pulse firing (§2.2, Fig. 4; the Schmitt trigger of Zarchan's strategic-intercep
 engine fires at its fixed level along A/|A| when |A| >= a_on, stops when |A| <= a_off, and in
 between keeps its previous state. The paper gives no thresholds; gnc_jax derives them from the
 engine (see ``simulation.pn.trigger_scale``). With ``relaxed=True`` the switch is replaced by
-s = p_on + (1 - p_on)(1 - p_off) s_prev, p_on = sigmoid((|A|/a_on - 1)/T),
-p_off = sigmoid((1 - |A|/a_off)/T), which tends to the hard logic as the temperature T -> 0 and
-lets gradients reach every gain; evaluation uses the hard logic.
+its smooth relaxation (``guidance.trigger.schmitt_trigger`` with value |A|, levels a_on and
+a_off), which tends to the hard logic as the temperature T -> 0 and lets gradients reach every
+gain; evaluation uses the hard logic.
 """
 
 import math
 from typing import NamedTuple
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 
 from .._types import Scalar, Vector3
@@ -36,6 +35,7 @@ from ..geometry.los import los_rate
 from ..params import from_config, param
 from ..scenario.schema import ScenarioError
 from .base import AbstractInterceptGuidance, EngineCommand, register_law, safe_unit
+from .trigger import schmitt_trigger  # re-exported: gnc_jax.guidance.apn.schmitt_trigger
 
 
 class PNNavigation(NamedTuple):
@@ -101,19 +101,6 @@ def augmented_pn_command(
     a_rel_target = -dynamics.relative_gravity(nav.r_target, nav.r)
     a_r_perp = a_rel_target - jnp.dot(a_rel_target, u) * u
     return n * (closing_speed(rho, rho_dot) * jnp.cross(omega, u) + 0.5 * a_r_perp), u
-
-
-def schmitt_trigger(magnitude, on_prev, a_on, a_off, temperature=None):
-    """Engine state from the command magnitude with hysteresis (hard, or relaxed with T).
-
-    Hard: 1 when ``magnitude >= a_on``, 0 when ``magnitude <= a_off``, else ``on_prev``.
-    Relaxed (``temperature`` given): p_on + (1 - p_on)(1 - p_off) on_prev, in [0, 1].
-    """
-    if temperature is None:
-        return jnp.where(magnitude >= a_on, 1.0, jnp.where(magnitude <= a_off, 0.0, on_prev))
-    p_on = jax.nn.sigmoid((magnitude / a_on - 1.0) / temperature)
-    p_off = jax.nn.sigmoid((1.0 - magnitude / a_off) / temperature)
-    return p_on + (1.0 - p_on) * (1.0 - p_off) * on_prev
 
 
 class APNState(NamedTuple):

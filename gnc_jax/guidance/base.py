@@ -27,6 +27,7 @@ from typing import ClassVar, NamedTuple
 import equinox as eqx
 import jax.numpy as jnp
 
+from .._numerics import safe_unit  # noqa: F401  (re-exported for the laws)
 from .._types import Array, Float, Matrix3, Scalar, Vector3
 from ..dynamics.impactor import Engine, RelativeDynamics
 from ..geometry.bplane import b_plane_point_to_inertial
@@ -69,14 +70,6 @@ class ImpactorGuidanceContext(eqx.Module):
     def aim_point(self, t) -> Vector3:
         """Inertial position of the current aim point (relative to the target), m."""
         return b_plane_point_to_inertial(self.aim_b_plane(t), self.c_bi)
-
-
-def safe_unit(v: Vector3, fallback: Vector3) -> Vector3:
-    """``v/|v|``, or ``fallback`` when ``v`` is (near) zero, with finite gradients either way."""
-    n2 = jnp.dot(v, v)
-    ok = n2 > 1e-30
-    n = jnp.sqrt(jnp.where(ok, n2, 1.0))
-    return jnp.where(ok, v / n, fallback)
 
 
 class AbstractGuidanceLaw(eqx.Module):

@@ -11,7 +11,6 @@ that reduces |omega|.
 from typing import NamedTuple
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 
 from .._types import Scalar
@@ -26,6 +25,7 @@ from .base import (
     register_law,
     safe_unit,
 )
+from .trigger import schmitt_trigger
 
 
 def switching_curve(rho, rho_dot_scalar, rho_limit):
@@ -51,10 +51,10 @@ class LOSGuidanceState(NamedTuple):
 class LOSSwitchingCurveGuidance(AbstractImpactorGuidance):
     """Seed 000 LOS law. Gains ``k1``, ``k2`` (paper: 4, 1) are differentiable leaves.
 
-    With ``relaxed=True`` the hysteresis switch is replaced by its smooth relaxation
-    ``s = p_on + (1 - p_on)(1 - p_off) s_prev`` with ``p_on = sigmoid((|w|/w_open - 1)/T)`` and
-    ``p_off = sigmoid((1 - |w|/w_close)/T)`` (temperature ``T``), so gradients with respect to
-    k1 and k2 exist; it reduces to the hard logic as T -> 0. Evaluation uses the hard logic.
+    With ``relaxed=True`` the hysteresis switch (:func:`~gnc_jax.guidance.trigger.schmitt_trigger`
+    on |omega| with levels omega_open, omega_close) is replaced by its smooth relaxation at
+    temperature ``T``, so gradients with respect to k1 and k2 exist; it reduces to the hard
+    logic as T -> 0. Evaluation uses the hard logic.
     """
 
     k1: Scalar = param(
@@ -95,12 +95,8 @@ class LOSSwitchingCurveGuidance(AbstractImpactorGuidance):
         omega = jnp.linalg.norm(los_rate(rho, rho_dot))
         w_open = switching_curve(rho_n, rdot, self.k1 * state.sigma_b_m)
         w_close = switching_curve(rho_n, rdot, self.k2 * state.sigma_b_m)
-        if self.relaxed:
-            p_on = jax.nn.sigmoid((omega / w_open - 1.0) / self.temperature)
-            p_off = jax.nn.sigmoid((1.0 - omega / w_close) / self.temperature)
-            on = p_on + (1.0 - p_on) * (1.0 - p_off) * state.engine_on
-        else:
-            on = jnp.where(omega >= w_open, 1.0, jnp.where(omega <= w_close, 0.0, state.engine_on))
+        temperature = self.temperature if self.relaxed else None
+        on = schmitt_trigger(omega, state.engine_on, w_open, w_close, temperature)
         on = jnp.where(t < ctx.cutoff_time_s, on, 0.0)
         # Eq. 19 up to sign: the zero-effort-miss direction -rho_dot x (rho_dot x rho) points
         # from the impactor to the closest-approach offset, so thrusting along it reduces |omega|.

@@ -14,6 +14,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from .._numerics import smooth_norm
 from .._types import Array, Float, Scalar, Vector3
 from ..dynamics.impactor import ImpactorState, coast_to_b_plane, propagate
 from ..params import param
@@ -36,10 +37,6 @@ class PredictiveGuidanceState(NamedTuple):
     mass_kg: Scalar  # on-board mass estimate (nominal flow)
     predicted_miss_m: Scalar  # |B_pred - aim| before the last burn
     burns: Scalar  # number of burns commanded so far
-
-
-def _safe_norm(v):
-    return jnp.sqrt(jnp.dot(v, v) + 1e-24)
 
 
 @register_law("predictive")
@@ -90,7 +87,7 @@ class PredictiveGuidance(AbstractImpactorGuidance):
         y = ImpactorState(nav.r, nav.v, mass_kg)
         y = propagate(ctx.dynamics, y, jnp.zeros(3), 0.0, t_burn - t, self.predictor_steps)
         thrust = ctx.engine.thrust_n
-        dv_n = _safe_norm(dv)
+        dv_n = smooth_norm(dv)
         duration = dv_n * mass_kg / thrust
         y = propagate(
             ctx.dynamics,

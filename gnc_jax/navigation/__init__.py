@@ -2,7 +2,25 @@
 
 from .camera import camera_attitude, los_angles, project, small_rotation
 from .centroid import Centroid, extract_centroid, label_components
-from .ekf import NavEstimate, propagate_covariance, propagate_state, update_los
+from .ekf import (
+    MeasurementPrediction,
+    NavEstimate,
+    ekf_update,
+    los_model,
+    predict_measurement,
+    propagate_covariance,
+    propagate_state,
+    update_los,
+)
+from .measurements import (
+    AbstractMeasurement,
+    Exposure,
+    GaussianLOSMeasurement,
+    ImageMeasurement,
+    Measurement,
+    measurement_class,
+    register_measurement,
+)
 from .render import (
     CameraModel,
     Frame,
@@ -22,6 +40,17 @@ __all__ = [
     "propagate_covariance",
     "propagate_state",
     "update_los",
+    "MeasurementPrediction",
+    "ekf_update",
+    "los_model",
+    "predict_measurement",
+    "AbstractMeasurement",
+    "Exposure",
+    "GaussianLOSMeasurement",
+    "ImageMeasurement",
+    "Measurement",
+    "measurement_class",
+    "register_measurement",
     "Centroid",
     "extract_centroid",
     "label_components",

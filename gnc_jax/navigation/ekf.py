@@ -5,6 +5,7 @@ rotation of it). Between images the model is straight-line motion plus the Δv t
 measures during burns; each image gives the two tangent-plane angles of the target's centroid.
 """
 
+from collections.abc import Callable
 from typing import NamedTuple
 
 import jax
@@ -50,29 +51,72 @@ def propagate_covariance(p: Covariance6, dt, q_accel, q_dv) -> Covariance6:
     return phi @ p @ phi.T + q
 
 
-def update_los(
-    nav: NavEstimate, z: Float[Array, "2"], c_ci: Matrix3, sigma_rad
-) -> tuple[NavEstimate, Float[Array, "2"]]:
-    """EKF update with the tangent-plane angles ``z`` of the target (rad).
+class MeasurementPrediction(NamedTuple):
+    """What the filter expects of one measurement before it sees it.
 
-    The predicted measurement is the LOS from the impactor to the target, -r, through the camera
-    attitude the navigation believes (``c_ci``). Joseph-form covariance update.
+    ``z`` = h(x_hat) the predicted measurement, ``jacobian`` H = dh/dx at x_hat, ``r_cov`` the
+    measurement-noise covariance R, and ``s`` = H P H^T + R the innovation covariance (the
+    image front end sizes its region of interest with it).
+    """
+
+    z: Float[Array, " m"]
+    jacobian: Float[Array, "m 6"]
+    r_cov: Float[Array, "m m"]
+    s: Float[Array, "m m"]
+
+
+def predict_measurement(
+    nav: NavEstimate, h: Callable[[State6], Float[Array, " m"]], r_cov: Float[Array, "m m"]
+) -> MeasurementPrediction:
+    """Predicted measurement h(x_hat), its Jacobian (``jax.jacfwd``) and the innovation
+    covariance S = H P H^T + R of the measurement function ``h`` with noise covariance ``r_cov``."""
+    z_pred = h(nav.x)
+    hj = jax.jacfwd(h)(nav.x)
+    s = hj @ nav.p @ hj.T + r_cov
+    return MeasurementPrediction(z_pred, hj, r_cov, s)
+
+
+def ekf_update(
+    nav: NavEstimate, z: Float[Array, " m"], predicted: MeasurementPrediction, valid=True
+) -> tuple[NavEstimate, Float[Array, " m"]]:
+    """EKF update with the measurement ``z`` (Joseph form, any measurement function).
+
+    K = P H^T S^-1, x <- x + K (z - h(x)), P <- (I - K H) P (I - K H)^T + K R K^T
+    (symmetrised), with ``predicted`` from :func:`predict_measurement`. When ``valid`` is false
+    (a rejected image) the estimate is returned unchanged.
 
     Returns:
-        The updated estimate and the innovation (rad).
+        The updated estimate and the innovation z - h(x_hat).
     """
+    hj, r_meas, s = predicted.jacobian, predicted.r_cov, predicted.s
+    k = jnp.linalg.solve(s, hj @ nav.p).T
+    innovation = z - predicted.z
+    x = nav.x + k @ innovation
+    ikh = jnp.eye(nav.x.shape[0]) - k @ hj
+    p = ikh @ nav.p @ ikh.T + k @ r_meas @ k.T
+    p = 0.5 * (p + p.T)
+    updated = jax.tree_util.tree_map(lambda a, b: jnp.where(valid, a, b), NavEstimate(x, p), nav)
+    return updated, innovation
+
+
+def los_model(c_ci: Matrix3) -> Callable[[State6], Float[Array, "2"]]:
+    """Measurement function of the tangent-plane angles: the LOS from the impactor to the
+    target, -r, through the camera attitude ``c_ci`` the navigation believes."""
 
     def h(x):
         return los_angles(c_ci, -x[:3])
 
-    z_pred = h(nav.x)
-    hj = jax.jacfwd(h)(nav.x)
-    r_meas = sigma_rad**2 * jnp.eye(2)
-    s = hj @ nav.p @ hj.T + r_meas
-    k = jnp.linalg.solve(s, hj @ nav.p).T
-    innovation = z - z_pred
-    x = nav.x + k @ innovation
-    ikh = jnp.eye(6) - k @ hj
-    p = ikh @ nav.p @ ikh.T + k @ r_meas @ k.T
-    p = 0.5 * (p + p.T)
-    return NavEstimate(x, p), innovation
+    return h
+
+
+def update_los(
+    nav: NavEstimate, z: Float[Array, "2"], c_ci: Matrix3, sigma_rad
+) -> tuple[NavEstimate, Float[Array, "2"]]:
+    """EKF update with the tangent-plane angles ``z`` of the target (rad), white noise
+    ``sigma_rad`` per axis: :func:`ekf_update` of :func:`los_model`.
+
+    Returns:
+        The updated estimate and the innovation (rad).
+    """
+    predicted = predict_measurement(nav, los_model(c_ci), sigma_rad**2 * jnp.eye(2))
+    return ekf_update(nav, z, predicted)

@@ -7,13 +7,16 @@ control step (guidance ``step`` -> engine -> RK4 truth step -> accelerometer -> 
 The run ends at the guidance cut-off; the truth then coasts to the B-plane.
 """
 
+import functools
+import math
 from typing import NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._status import Status, all_finite
+from .._numerics import safe_norm
+from .._random import stream_key, stream_normal
 from .._types import Array, Float, PRNGKeyArray, Scalar, Vector3
 from ..dynamics.impactor import (
     G0,
@@ -24,18 +27,30 @@ from ..dynamics.impactor import (
     perturb_direction,
     propagate,
 )
+from ..geometry.bplane import b_plane_frame, check_b_plane_frame
+from ..geometry.ellipse import b_plane_position_covariance, mean_position_error
 from ..guidance.base import AbstractImpactorGuidance, ImpactorGuidanceContext
-from ..navigation.camera import camera_attitude, los_angles, small_rotation
-from ..navigation.centroid import extract_centroid
-from ..navigation.ekf import NavEstimate, propagate_covariance, propagate_state, update_los
-from ..navigation.render import (
-    CameraModel,
-    TargetModel,
-    choose_binning,
-    phase_offset_tangent,
-    render_frame,
-    roi_to_tangent,
+from ..navigation.camera import camera_attitude, small_rotation
+from ..navigation.ekf import (
+    NavEstimate,
+    ekf_update,
+    los_model,
+    predict_measurement,
+    propagate_covariance,
+    propagate_state,
 )
+from ..navigation.measurements import (
+    AbstractMeasurement,
+    Exposure,
+    GaussianLOSMeasurement,
+    Measurement,
+    camera_model,
+    measurement_class,
+    target_model,
+)
+from ..navigation.render import CameraModel, TargetModel
+from ..scenario.impactor import time_of_flight_s
+from .base import flatten_trace, with_status
 
 
 class ImpactorErrors(eqx.Module):
@@ -46,7 +61,7 @@ class ImpactorErrors(eqx.Module):
         default_factory=lambda: jnp.array([150e3, 8e3, 8e3])
     )  # along the B-plane axes (S, T, R)
     knowledge_velocity_mps: Scalar = 0.1
-    image_processing_rad: Scalar = 10e-6
+    image_processing_rad: Scalar = 10e-6  # the filter's model; the front end has its own
     attitude_control_rad: Scalar = 320e-6
     attitude_bias_rad: Scalar = 100e-6
     attitude_noise_rad: Scalar = 30e-6
@@ -68,11 +83,11 @@ class ImpactorSimulation(eqx.Module):
         consider_attitude_bias: 1.0 to add the attitude-bias rotation to the filter's initial
             covariance (:func:`attitude_bias_covariance`), 0.0 to ignore it.
         n_images, steps_per_image: loop sizes (static); coast_steps: RK4 steps of the final coast.
-        measurement: "noise" (LOS + Gaussian image-processing error) or "image" (a rendered
-            frame centroided by the seed 002 pipeline, :func:`image_measurement`) (static).
-        camera, target: camera/detector and target models of the "image" front end.
-        phase_correction: 1.0 to remove the predicted Lambertian-sphere centre-of-brightness
-            offset from each image centroid before the update, 0.0 not to.
+        measurement: the LOS measurement front end (a registered
+            :class:`~gnc_jax.navigation.measurements.AbstractMeasurement`, chosen by
+            ``navigation.measurement``): Gaussian LOS noise or rendered frames.
+        camera, target: the scenario's camera/detector and target models (the image front end
+            holds its own; these are kept for the report's frame figure).
     """
 
     r0_m: Vector3
@@ -88,14 +103,15 @@ class ImpactorSimulation(eqx.Module):
     n_images: int = eqx.field(static=True)
     steps_per_image: int = eqx.field(static=True)
     coast_steps: int = eqx.field(static=True, default=4)
-    measurement: str = eqx.field(static=True, default="noise")
+    measurement: AbstractMeasurement = eqx.field(
+        default_factory=lambda: GaussianLOSMeasurement(jnp.asarray(10e-6))
+    )
     camera: CameraModel = eqx.field(default_factory=CameraModel)
     target: TargetModel = eqx.field(
         default_factory=lambda: TargetModel(
             jnp.full(3, 3e3), jnp.eye(3), jnp.array([1.0, 0.0, 0.0])
         )
     )
-    phase_correction: Scalar = 1.0
 
 
 class ImpactorOutcome(NamedTuple):
@@ -148,20 +164,9 @@ class _Carry(NamedTuple):
     images_used: Array  # int
 
 
-# Stream identifiers for jax.random.fold_in: each kind of draw has its own stream, so adding a
+# Stream identifiers of gnc_jax._random: each kind of draw has its own stream, so adding a
 # draw never changes the others.
 _DELIVERY, _KNOW_POS, _KNOW_VEL, _ATT_BIAS, _ACC_BIAS, _IMAGES, _STEPS = range(7)
-
-
-def _safe_norm(x):
-    """|x| with a zero (not NaN) gradient at x = 0: coasting steps have zero Δv."""
-    n2 = jnp.dot(x, x)
-    ok = n2 > 0.0
-    return jnp.where(ok, jnp.sqrt(jnp.where(ok, n2, 1.0)), 0.0)
-
-
-def _normal(key, stream, shape=(3,)):
-    return jax.random.normal(jax.random.fold_in(key, stream), shape)
 
 
 def _cross_matrix(a):
@@ -187,9 +192,9 @@ def initial_conditions(sim: ImpactorSimulation, key: PRNGKeyArray):
     """Dispersed truth, initial estimate and constant error draws of one run."""
     err = sim.errors
     c_bi = sim.context.c_bi
-    delivery = err.delivery_position_m * _normal(key, _DELIVERY)
-    know_pos = err.knowledge_position_m * _normal(key, _KNOW_POS)  # S, T, R components
-    know_vel = err.knowledge_velocity_mps * _normal(key, _KNOW_VEL)
+    delivery = err.delivery_position_m * stream_normal(key, _DELIVERY)
+    know_pos = err.knowledge_position_m * stream_normal(key, _KNOW_POS)  # S, T, R components
+    know_vel = err.knowledge_velocity_mps * stream_normal(key, _KNOW_VEL)
     r_true = sim.r0_m + delivery
     truth = ImpactorState(r_true, sim.v0_mps, jnp.asarray(sim.mass_kg, float))
     x_hat = jnp.concatenate([r_true + c_bi.T @ know_pos, sim.v0_mps + know_vel])
@@ -202,42 +207,128 @@ def initial_conditions(sim: ImpactorSimulation, key: PRNGKeyArray):
         delivery_error_m=c_bi @ delivery,
         knowledge_position_error_m=know_pos,
         knowledge_velocity_error_mps=c_bi @ know_vel,
-        attitude_bias_rad=err.attitude_bias_rad * _normal(key, _ATT_BIAS),
-        accel_bias_mps2=err.accel_bias_mps2 * _normal(key, _ACC_BIAS),
+        attitude_bias_rad=err.attitude_bias_rad * stream_normal(key, _ATT_BIAS),
+        accel_bias_mps2=err.accel_bias_mps2 * stream_normal(key, _ACC_BIAS),
     )
     return truth, NavEstimate(x_hat, p0), draws
 
 
-def image_measurement(sim: ImpactorSimulation, nav: NavEstimate, c_true, c_est, r_true, sigma, key):
-    """Image-level LOS measurement: render, centroid, phase-correct (seed 002 §3.1; SPEC §5).
+def take_image(
+    sim: ImpactorSimulation, nav: NavEstimate, r_true: Vector3, attitude_bias_rad, key
+) -> tuple[NavEstimate, Measurement]:
+    """One image and its EKF update (seed 002 §3.2): the updated estimate and the measurement.
 
-    The on-board software places the region of interest where its estimate predicts the target
-    (through its attitude estimate ``c_est``), with a binning that fits the predicted disc and
-    the 3-sigma innovation uncertainty (:func:`~gnc_jax.navigation.render.choose_binning`).
-    The frame is rendered from the TRUE geometry in the TRUE camera frame ``c_true``; the
-    centroid's tangent angles are the measurement, corrected by the predicted Lambertian-sphere
-    centre-of-brightness offset when ``sim.phase_correction`` is 1.
-
-    Returns:
-        ``(z, valid)``: tangent angles (rad) and whether the centroid is usable.
+    The camera is pointed at the estimated target direction with attitude-control error; the
+    filter interprets the image through its attitude estimate (bias + random error), with the
+    image-processing and attitude noise as its measurement noise. The front end
+    (``sim.measurement``) sees the truth and the filter's prediction; a rejected image leaves
+    the estimate unchanged.
     """
-    cam, tgt = sim.camera, sim.target
+    err = sim.errors
+    w = jax.random.normal(key, (8,))  # 2 measurement, 3 attitude control, 3 attitude knowledge
+    c_cmd = camera_attitude(-nav.r, sim.context.c_bi[2])
+    c_true = small_rotation(err.attitude_control_rad * w[2:5]) @ c_cmd
+    c_est = small_rotation(attitude_bias_rad + err.attitude_noise_rad * w[5:8]) @ c_true
+    sigma = jnp.sqrt(err.image_processing_rad**2 + err.attitude_noise_rad**2)
+    predicted = predict_measurement(nav, los_model(c_est), sigma**2 * jnp.eye(2))
+    exposure = Exposure(-r_true, c_true, c_est)
+    meas = sim.measurement(exposure, nav, predicted, w[:2], jax.random.fold_in(key, 1))
+    nav, _ = ekf_update(nav, meas.z, predicted, meas.valid)
+    return nav, meas
 
-    def h(x):
-        return los_angles(c_est, -x[:3])
 
-    uv_pred = h(nav.x)
-    hj = jax.jacfwd(h)(nav.x)
-    s_pred = hj @ nav.p @ hj.T + sigma**2 * jnp.eye(2)
-    pointing_sigma = jnp.sqrt(jnp.max(jnp.diag(s_pred)))
-    rho_hat = jnp.linalg.norm(nav.r)
-    disc = jnp.arcsin(jnp.minimum(tgt.bounding_radius_m / rho_hat, 0.999))
-    bin_ = choose_binning(cam, disc, pointing_sigma)
-    frame = render_frame(cam, tgt, c_true, -r_true, uv_pred, bin_, key)
-    c = extract_centroid(frame.dn, cam.window_px, cam.label_iterations)
-    z = roi_to_tangent(cam, frame.origin_px, frame.bin, c.xy)
-    offset = phase_offset_tangent(c_est, nav.r, tgt.sun_direction, tgt.mean_radius_m)
-    return z - sim.phase_correction * offset, c.valid
+def _control_step(sim: ImpactorSimulation, law, accel_bias, record, carry: _Carry, inputs):
+    """One control step: guidance ``step`` -> engine -> RK4 truth -> accelerometer -> EKF mean."""
+    ctx, err = sim.context, sim.errors
+    dt = ctx.dt_s
+    t, noise = inputs  # noise: 3 accelerometer, 1 magnitude, 2 pointing (standard normal)
+    command, law_state = law.step(carry.law_state, carry.nav, t, ctx)
+    throttle = command.throttle
+    ignition = (throttle > 0.0) & (carry.throttle_prev <= 0.0)
+    fresh = jnp.concatenate(
+        [err.burn_magnitude_frac * noise[3:4], err.attitude_control_rad * noise[4:6]]
+    )
+    execution_error = jnp.where(ignition, fresh, carry.execution_error)
+    direction = perturb_direction(command.direction, execution_error[1:])
+    thrust = throttle * sim.engine.thrust_n * (1.0 + execution_error[0]) * direction
+    flow = throttle * sim.engine.mass_flow(1.0)
+    truth = propagate(sim.dynamics, carry.truth, thrust, flow, dt, 1)
+    # The accelerometer integrates the non-gravitational Δv while the engine fires.
+    dv_true = thrust * dt / (0.5 * (carry.truth.m + truth.m))
+    dv_meas = dv_true + throttle * (accel_bias + err.accel_noise_mps2 * noise[:3]) * dt
+    nav = propagate_state(carry.nav, dv_meas, dt)
+    new = carry._replace(
+        truth=truth,
+        nav=nav,
+        law_state=law_state,
+        throttle_prev=throttle,
+        execution_error=execution_error,
+        dv_mps=carry.dv_mps + safe_norm(dv_true),
+        firings=carry.firings + ignition.astype(carry.firings.dtype),
+        burn_time_s=carry.burn_time_s + throttle * dt,
+        burn_time_image_s=carry.burn_time_image_s + throttle * dt,
+    )
+    rec = None
+    if record:
+        rec = StepRecord(t, throttle, truth.r, truth.v, nav.r, nav.v, law_state)
+    return new, rec
+
+
+def _image_step(sim: ImpactorSimulation, law, key, draws, record, carry: _Carry, i):
+    """One image interval: image -> EKF update -> guidance ``plan`` -> control steps ->
+    covariance propagation."""
+    ctx, err = sim.context, sim.errors
+    dt = ctx.dt_s
+    t = i * ctx.image_interval_s
+    k_img = stream_key(key, _IMAGES, i)
+    nav, meas = take_image(sim, carry.nav, carry.truth.r, draws["attitude_bias_rad"], k_img)
+    law_state = law.plan(carry.law_state, nav, t, ctx)
+    los_error_sq = jnp.where(meas.valid, jnp.sum((meas.z - meas.z_true) ** 2), 0.0)
+    carry = carry._replace(
+        nav=nav,
+        law_state=law_state,
+        burn_time_image_s=jnp.zeros(()),
+        los_error_sq=carry.los_error_sq + los_error_sq,
+        images_used=carry.images_used + meas.valid.astype(carry.images_used.dtype),
+    )
+
+    noise = jax.random.normal(stream_key(key, _STEPS, i), (sim.steps_per_image, 6))
+    ts = t + dt * jnp.arange(sim.steps_per_image)
+    step = functools.partial(_control_step, sim, law, draws["accel_bias_mps2"], record)
+    carry, rec = jax.lax.scan(step, carry, (ts, noise))
+    # Covariance: straight-line growth over the interval plus the accelerometer's Δv error.
+    tb = carry.burn_time_image_s
+    q_dv = err.accel_noise_mps2**2 * dt * tb + err.accel_bias_mps2**2 * tb**2
+    p = propagate_covariance(carry.nav.p, ctx.image_interval_s, sim.process_noise_m2s3, q_dv)
+    return carry._replace(nav=NavEstimate(carry.nav.x, p)), rec
+
+
+def _outcome(sim: ImpactorSimulation, carry: _Carry, draws) -> ImpactorOutcome:
+    """Coast the truth to the B-plane and collect the run's results (status unset)."""
+    ctx = sim.context
+    b, _ = coast_to_b_plane(sim.dynamics, carry.truth, ctx.c_bi, sim.coast_steps)
+    miss = b - ctx.aim_final_m
+    nav = carry.nav
+    t_go = jnp.linalg.norm(nav.r) / jnp.linalg.norm(nav.v)
+    sigma_b = mean_position_error(b_plane_position_covariance(nav.p, t_go, ctx.c_bi))
+    return ImpactorOutcome(
+        status=jnp.zeros((), jnp.int32),
+        miss_m=jnp.linalg.norm(miss),
+        miss_t_m=miss[0],
+        miss_r_m=miss[1],
+        b_t_m=b[0],
+        b_r_m=b[1],
+        dv_mps=carry.dv_mps,
+        firings=carry.firings,
+        burn_time_s=carry.burn_time_s,
+        fuel_kg=sim.mass_kg - carry.truth.m,
+        nav_position_error_m=jnp.linalg.norm(nav.r - carry.truth.r),
+        nav_sigma_b_m=sigma_b,
+        **draws,
+        los_error_rms_urad=1e6
+        * jnp.sqrt(carry.los_error_sq / jnp.maximum(2 * carry.images_used, 1)),
+        images_rejected=(sim.n_images - carry.images_used).astype(jnp.int32),
+    )
 
 
 def simulate(
@@ -257,95 +348,12 @@ def simulate(
     Returns:
         ``(outcome, trace)``; ``trace`` is ``None`` unless ``record``.
     """
-    ctx = sim.context
-    err = sim.errors
-    dt = ctx.dt_s
     truth0, nav0, draws = initial_conditions(sim, key)
-    att_bias = draws["attitude_bias_rad"]
-    acc_bias = draws["accel_bias_mps2"]
-    r_axis = ctx.c_bi[2]
-    flow_full = sim.engine.mass_flow(1.0)
-
-    def control_step(carry: _Carry, inputs):
-        t, noise = inputs  # noise: 3 accelerometer, 1 magnitude, 2 pointing (standard normal)
-        command, law_state = law.step(carry.law_state, carry.nav, t, ctx)
-        throttle = command.throttle
-        ignition = (throttle > 0.0) & (carry.throttle_prev <= 0.0)
-        fresh = jnp.concatenate(
-            [err.burn_magnitude_frac * noise[3:4], err.attitude_control_rad * noise[4:6]]
-        )
-        execution_error = jnp.where(ignition, fresh, carry.execution_error)
-        direction = perturb_direction(command.direction, execution_error[1:])
-        thrust = throttle * sim.engine.thrust_n * (1.0 + execution_error[0]) * direction
-        flow = throttle * flow_full
-        truth = propagate(sim.dynamics, carry.truth, thrust, flow, dt, 1)
-        # The accelerometer integrates the non-gravitational Δv while the engine fires.
-        dv_true = thrust * dt / (0.5 * (carry.truth.m + truth.m))
-        dv_meas = dv_true + throttle * (acc_bias + err.accel_noise_mps2 * noise[:3]) * dt
-        nav = propagate_state(carry.nav, dv_meas, dt)
-        new = _Carry(
-            truth=truth,
-            nav=nav,
-            law_state=law_state,
-            throttle_prev=throttle,
-            execution_error=execution_error,
-            dv_mps=carry.dv_mps + _safe_norm(dv_true),
-            firings=carry.firings + ignition.astype(carry.firings.dtype),
-            burn_time_s=carry.burn_time_s + throttle * dt,
-            burn_time_image_s=carry.burn_time_image_s + throttle * dt,
-            los_error_sq=carry.los_error_sq,
-            images_used=carry.images_used,
-        )
-        rec = None
-        if record:
-            rec = StepRecord(t, throttle, truth.r, truth.v, nav.r, nav.v, law_state)
-        return new, rec
-
-    def image_step(carry: _Carry, i):
-        t = i * ctx.image_interval_s
-        k_img = jax.random.fold_in(jax.random.fold_in(key, _IMAGES), i)
-        w = jax.random.normal(k_img, (8,))
-        # Camera pointed at the estimated target direction, with attitude control error; the
-        # filter interprets the image with its attitude estimate (bias + random error).
-        c_cmd = camera_attitude(-carry.nav.r, r_axis)
-        c_true = small_rotation(err.attitude_control_rad * w[2:5]) @ c_cmd
-        c_est = small_rotation(att_bias + err.attitude_noise_rad * w[5:8]) @ c_true
-        z_true = los_angles(c_true, -carry.truth.r)
-        sigma = jnp.sqrt(err.image_processing_rad**2 + err.attitude_noise_rad**2)
-        if sim.measurement == "image":
-            z, valid = image_measurement(
-                sim, carry.nav, c_true, c_est, carry.truth.r, sigma, jax.random.fold_in(k_img, 1)
-            )
-            updated, _ = update_los(carry.nav, z, c_est, sigma)
-            nav = jax.tree_util.tree_map(lambda a, b: jnp.where(valid, a, b), updated, carry.nav)
-        else:
-            z = z_true + err.image_processing_rad * w[:2]
-            valid = jnp.ones((), bool)
-            nav, _ = update_los(carry.nav, z, c_est, sigma)
-        law_state = law.plan(carry.law_state, nav, t, ctx)
-        carry = carry._replace(
-            nav=nav,
-            law_state=law_state,
-            burn_time_image_s=jnp.zeros(()),
-            los_error_sq=carry.los_error_sq + jnp.where(valid, jnp.sum((z - z_true) ** 2), 0.0),
-            images_used=carry.images_used + valid.astype(carry.images_used.dtype),
-        )
-
-        k_steps = jax.random.fold_in(jax.random.fold_in(key, _STEPS), i)
-        noise = jax.random.normal(k_steps, (sim.steps_per_image, 6))
-        ts = t + dt * jnp.arange(sim.steps_per_image)
-        carry, rec = jax.lax.scan(control_step, carry, (ts, noise))
-        # Covariance: straight-line growth over the interval plus the accelerometer's Δv error.
-        tb = carry.burn_time_image_s
-        q_dv = err.accel_noise_mps2**2 * dt * tb + err.accel_bias_mps2**2 * tb**2
-        p = propagate_covariance(carry.nav.p, ctx.image_interval_s, sim.process_noise_m2s3, q_dv)
-        return carry._replace(nav=NavEstimate(carry.nav.x, p)), rec
-
     z = jnp.zeros(())
     carry0 = _Carry(
         truth=truth0,
         nav=nav0,
-        law_state=law.init(nav0, ctx),
+        law_state=law.init(nav0, sim.context),
         throttle_prev=z,
         execution_error=jnp.zeros(3),
         dv_mps=z,
@@ -355,80 +363,32 @@ def simulate(
         los_error_sq=z,
         images_used=jnp.zeros((), jnp.int32),
     )
+    image_step = functools.partial(_image_step, sim, law, key, draws, record)
     carry, rec = jax.lax.scan(image_step, carry0, jnp.arange(sim.n_images))
-
-    b, _ = coast_to_b_plane(sim.dynamics, carry.truth, ctx.c_bi, sim.coast_steps)
-    aim = ctx.aim_final_m
-    miss = b - aim
-    from ..geometry.ellipse import b_plane_position_covariance, mean_position_error
-
-    nav = carry.nav
-    t_go = jnp.linalg.norm(nav.r) / jnp.linalg.norm(nav.v)
-    sigma_b = mean_position_error(b_plane_position_covariance(nav.p, t_go, ctx.c_bi))
-    outcome = ImpactorOutcome(
-        status=jnp.zeros((), jnp.int32),
-        miss_m=jnp.linalg.norm(miss),
-        miss_t_m=miss[0],
-        miss_r_m=miss[1],
-        b_t_m=b[0],
-        b_r_m=b[1],
-        dv_mps=carry.dv_mps,
-        firings=carry.firings,
-        burn_time_s=carry.burn_time_s,
-        fuel_kg=sim.mass_kg - carry.truth.m,
-        nav_position_error_m=jnp.linalg.norm(nav.r - carry.truth.r),
-        nav_sigma_b_m=sigma_b,
-        **draws,
-        los_error_rms_urad=1e6
-        * jnp.sqrt(carry.los_error_sq / jnp.maximum(2 * carry.images_used, 1)),
-        images_rejected=(sim.n_images - carry.images_used).astype(jnp.int32),
-    )
-    finite = all_finite(outcome)
-    outcome = outcome._replace(status=jnp.where(finite, Status.ok, Status.nan).astype(jnp.int32))
-    if record:
-        rec = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[2:]), rec)
-    return outcome, rec
+    return with_status(_outcome(sim, carry, draws)), flatten_trace(rec)
 
 
-def _camera_model(cam: dict) -> CameraModel:
+def errors_from_config(er: dict, nv: dict) -> ImpactorErrors:
+    """The :class:`ImpactorErrors` of validated ``[errors]`` and ``[navigation]`` sections (SI)."""
     f = lambda x: jnp.asarray(x, dtype=jnp.float64)  # noqa: E731
-    adc_max = 2.0 ** cam["adc_bits"] - 1.0
-    return CameraModel(
-        focal_length_m=f(cam["focal_length_m"]),
-        pixel_pitch_m=f(cam["pixel_pitch_um"] * 1e-6),
-        psf_sigma_px=f(cam["psf_sigma_px"]),
-        signal_e=f(cam["signal_e"]),
-        full_well_e=f(cam["full_well_e"]),
-        read_noise_e=f(cam["read_noise_e"]),
-        gain_e_per_dn=f(cam["full_well_e"] / adc_max),
-        bias_dn=f(cam["bias_dn"]),
-        adc_max_dn=f(adc_max),
-        roi_px=int(cam["roi_px"]),
-        window_px=int(cam["window_px"]),
-        samples=int(cam["samples"]),
-        label_iterations=int(cam["label_iterations"]),
-        max_bin_log2=int(cam["max_bin_log2"]),
-    )
-
-
-def _target_model(tg: dict, sun_direction) -> TargetModel:
-    import math
-
-    rot = [math.radians(a) for a in tg["orientation_deg"]]
-    return TargetModel(
-        semi_axes_m=jnp.asarray(tg["semi_axes_km"], dtype=jnp.float64) * 1e3,
-        c_bi=small_rotation(jnp.asarray(rot, dtype=jnp.float64)),
-        sun_direction=sun_direction,
+    urad, ug = 1e-6, 1e-6 * G0
+    return ImpactorErrors(
+        delivery_position_m=f(er["delivery_position_km"] * 1e3),
+        knowledge_position_m=f(nv["knowledge_position_km"]) * 1e3,
+        knowledge_velocity_mps=f(nv["knowledge_velocity_mps"]),
+        image_processing_rad=f(er["image_processing_urad"] * urad),
+        attitude_control_rad=f(er["attitude_control_urad"] * urad),
+        attitude_bias_rad=f(er["attitude_bias_urad"] * urad),
+        attitude_noise_rad=f(er["attitude_noise_urad"] * urad),
+        accel_bias_mps2=f(er["accel_bias_ug"] * ug),
+        accel_noise_mps2=f(er["accel_noise_ug"] * ug),
+        burn_magnitude_frac=f(er["burn_magnitude_pct"] / 100.0),
     )
 
 
 def build(scenario) -> ImpactorSimulation:
     """Simulation data of a validated impactor :class:`Scenario` (SI units); the guidance law
     is built by the system from ``[guidance.<law>]`` (``systems.impactor``)."""
-    import math
-
-    from ..geometry.bplane import b_plane_frame, check_b_plane_frame
-    from ..scenario.impactor import time_of_flight_s
 
     cfg = scenario.config
     a, sc, dy, cam, nv, er, g = (
@@ -471,19 +431,7 @@ def build(scenario) -> ImpactorSimulation:
         dt_s=float(g["dt_s"]),
         image_interval_s=float(image_dt),
     )
-    urad, ug = 1e-6, 1e-6 * G0
-    errors = ImpactorErrors(
-        delivery_position_m=f(er["delivery_position_km"] * 1e3),
-        knowledge_position_m=f(nv["knowledge_position_km"]) * 1e3,
-        knowledge_velocity_mps=f(nv["knowledge_velocity_mps"]),
-        image_processing_rad=f(er["image_processing_urad"] * urad),
-        attitude_control_rad=f(er["attitude_control_urad"] * urad),
-        attitude_bias_rad=f(er["attitude_bias_urad"] * urad),
-        attitude_noise_rad=f(er["attitude_noise_urad"] * urad),
-        accel_bias_mps2=f(er["accel_bias_ug"] * ug),
-        accel_noise_mps2=f(er["accel_noise_ug"] * ug),
-        burn_magnitude_frac=f(er["burn_magnitude_pct"] / 100.0),
-    )
+    errors = errors_from_config(er, nv)
     sim = ImpactorSimulation(
         r0_m=r0,
         v0_mps=v0,
@@ -498,9 +446,8 @@ def build(scenario) -> ImpactorSimulation:
         n_images=int(math.ceil(t_cut / image_dt - 1e-9)),
         steps_per_image=int(round(image_dt / g["dt_s"])),
         coast_steps=int(dy["coast_steps"]),
-        measurement=nv["measurement"],
-        camera=_camera_model(cam),
-        target=_target_model(cfg["target"], sun / jnp.linalg.norm(sun)),
-        phase_correction=f(1.0 if nv["phase_correction"] else 0.0),
+        measurement=measurement_class(nv["measurement"]).from_config(cfg),
+        camera=camera_model(cam),
+        target=target_model(cfg["target"], sun / jnp.linalg.norm(sun)),
     )
     return sim

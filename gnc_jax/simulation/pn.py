@@ -10,26 +10,34 @@ centre).
 
 Navigation (seed 004 Table 4 knowledge errors): the paper's Monte Carlo uses initial position
 knowledge (100, 10) km, velocity knowledge 0.1 m/s and a 320 urad attitude measurement error,
-but does not describe its navigation. gnc_jax closes the loop with the existing camera + EKF
-chain (navigation/camera.py, navigation/ekf.py): the filter starts from the knowledge errors
-(drawn per run, along / across the initial LOS), takes the target's LOS angles at every
-guidance step (the paper's loop recomputes the LOS at every step, Fig. 4) with the attitude
-error as white angle noise, and predicts with straight-line motion plus the modelled
-differential gravity and the executed Δv (no accelerometer error in Table 4). The same
-attitude error tilts each firing's thrust. ``navigation.model = "perfect"`` feeds the law the
-true state (the paper's error-free Table 3 runs).
+but does not describe its navigation. gnc_jax closes the loop with the impactor's camera,
+LOS front end and EKF (navigation/camera.py, navigation/measurements/gaussian.py,
+navigation/ekf.py): the filter starts from the knowledge errors (drawn per run, along / across
+the initial LOS), takes the target's LOS angles at every guidance step (the paper's loop
+recomputes the LOS at every step, Fig. 4) with the attitude error as white angle noise, and
+predicts with straight-line motion plus the modelled differential gravity and the executed Δv
+(no accelerometer error in Table 4). The same attitude error tilts each firing's thrust.
+``navigation.model = "perfect"`` feeds the law the true state (the paper's error-free Table 3
+runs).
 """
 
+import functools
+import math
 from typing import NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
-from .._status import Status, all_finite
+from .._numerics import safe_norm
+from .._random import stream_key, stream_normal
+from .._status import Status
 from .._types import Array, Float, Matrix3, PRNGKeyArray, Scalar, Vector3
 from ..dynamics.impactor import Engine, perturb_direction
 from ..dynamics.intercept import InterceptDynamics, InterceptState, coast_to_b_plane, propagate
+from ..geometry.bplane import b_plane_frame
+from ..geometry.kepler import OrbitalElements, elements_to_state
 from ..guidance.apn import (
     AugmentedPNGuidance,
     PNGuidanceContext,
@@ -38,9 +46,17 @@ from ..guidance.apn import (
     closing_speed,
     pulse_train_estimate,
 )
-from ..navigation.camera import camera_attitude, los_angles
-from ..navigation.ekf import NavEstimate, propagate_covariance, propagate_state, update_los
-from .impactor import _normal, _safe_norm  # the same draws and |Δv| as the seed 000 loop
+from ..navigation.camera import camera_attitude
+from ..navigation.ekf import (
+    NavEstimate,
+    ekf_update,
+    los_model,
+    predict_measurement,
+    propagate_covariance,
+    propagate_state,
+)
+from ..navigation.measurements import AbstractMeasurement, Exposure, GaussianLOSMeasurement
+from .base import flatten_trace, with_status
 
 
 class PNErrors(eqx.Module):
@@ -62,6 +78,8 @@ class PNSimulation(eqx.Module):
             across it in the orbit plane, out of plane) at t = 0, for the knowledge errors.
         planar: keep every error in the orbit plane (static); nav_model: "ekf" or "perfect".
         n_images, steps_per_image, coast_steps: loop sizes (static).
+        measurement: the LOS front end (Gaussian angle noise of the attitude error, zero out
+            of plane when planar).
     """
 
     y0: InterceptState
@@ -72,6 +90,7 @@ class PNSimulation(eqx.Module):
     process_noise_m2s3: Scalar
     c_bi: Matrix3
     los_frame0: Matrix3
+    measurement: AbstractMeasurement
     planar: bool = eqx.field(static=True)
     nav_model: str = eqx.field(static=True)
     n_images: int = eqx.field(static=True)
@@ -128,8 +147,8 @@ _KNOW_POS, _KNOW_VEL, _IMAGES, _STEPS = range(4)
 def _initial_nav(sim: PNSimulation, key):
     err = sim.errors
     mask = jnp.array([1.0, 1.0, 0.0]) if sim.planar else jnp.ones(3)
-    know_pos = mask * err.knowledge_position_m * _normal(key, _KNOW_POS)
-    know_vel = mask * err.knowledge_velocity_mps * _normal(key, _KNOW_VEL)
+    know_pos = mask * err.knowledge_position_m * stream_normal(key, _KNOW_POS)
+    know_vel = mask * err.knowledge_velocity_mps * stream_normal(key, _KNOW_VEL)
     frame = sim.los_frame0
     y0 = sim.y0
     x_hat = jnp.concatenate([y0.r + frame.T @ know_pos, y0.v + frame.T @ know_vel])
@@ -138,6 +157,93 @@ def _initial_nav(sim: PNSimulation, key):
     p_pos = frame.T @ jnp.diag(sig_p**2) @ frame
     p0 = jax.scipy.linalg.block_diag(p_pos, sig_v**2 * jnp.eye(3))
     return NavEstimate(x_hat, p0), know_pos, know_vel
+
+
+def _control_step(sim: PNSimulation, law: AugmentedPNGuidance, record, carry: _Carry, inputs):
+    """One guidance step: APN command -> Schmitt trigger -> pulse -> RK4 truth -> EKF mean."""
+    ctx, err = sim.context, sim.errors
+    dt = ctx.dt_s
+    perfect = sim.nav_model == "perfect"
+    t, noise = inputs  # two standard normals: the pointing error of a new firing
+    truth = carry.truth
+    nav = NavEstimate(jnp.concatenate([truth.r, truth.v]), carry.nav.p) if perfect else carry.nav
+    navsol = PNNavigation(nav.r, nav.v, truth.r_target)
+    command, law_state = law.step(carry.law_state, navsol, t, ctx)
+    on = law_state.engine_on
+    ignition = (on > 0.5) & (carry.on_prev <= 0.5)
+    fresh = err.attitude_rad * noise
+    pointing = jnp.where(ignition, fresh, carry.pointing_error)
+    if sim.planar:  # rotate within the orbit plane about its normal
+        d = command.direction
+        tilted = d + pointing[0] * jnp.cross(ctx.reference_normal, d)
+        direction = tilted / jnp.linalg.norm(tilted)
+    else:
+        direction = perturb_direction(command.direction, pointing)
+    throttle = command.throttle
+    thrust = throttle * sim.engine.thrust_n * direction
+    new_truth = propagate(sim.dynamics, truth, thrust, throttle * sim.engine.mass_flow(1.0), dt, 1)
+    dv = thrust * dt / (0.5 * (truth.m + new_truth.m))
+    if not perfect:
+        # Executed Δv (perfect accelerometer) plus the modelled gravity over the step.
+        g = ctx.dynamics.relative_gravity(truth.r_target, nav.r)
+        nav = propagate_state(nav, dv + g * dt, dt)
+    fired = on > 0.5
+    # A firing is one pulse train of one thruster direction: reversing the thrust (the
+    # opposite thrusters) while the trigger stays on starts a new firing.
+    reversal = fired & (carry.on_prev > 0.5) & (jnp.dot(direction, carry.direction_prev) < 0)
+    new = _Carry(
+        truth=new_truth,
+        nav=nav,
+        law_state=law_state,
+        on_prev=on,
+        direction_prev=direction,
+        pointing_error=pointing,
+        dv_mps=carry.dv_mps + safe_norm(dv),
+        firings=carry.firings + (ignition | reversal).astype(jnp.int32),
+        ignitions=carry.ignitions + ignition.astype(jnp.int32),
+        pulses=carry.pulses + fired.astype(jnp.int32),
+        last_firing_s=jnp.where(fired, t, carry.last_firing_s),
+    )
+    rec = None
+    if record:
+        r_m = truth.r
+        rec = PNRecord(
+            t, on, law_state.command_mps2, law_state.coefficient, jnp.linalg.norm(r_m), r_m
+        )
+    return new, rec
+
+
+def take_image(sim: PNSimulation, nav: NavEstimate, r_true: Vector3, key) -> NavEstimate:
+    """One LOS measurement and its EKF update: the camera points at the estimated target
+    direction (x_c = h x boresight lies in the orbit plane), the attitude error is white angle
+    noise of the front end (``sim.measurement``) and the filter's measurement noise."""
+    w = jax.random.normal(key, (2,))
+    c_cam = camera_attitude(-nav.r, sim.context.reference_normal)
+    sigma = jnp.maximum(sim.errors.attitude_rad, 1e-9)
+    predicted = predict_measurement(nav, los_model(c_cam), sigma**2 * jnp.eye(2))
+    meas = sim.measurement(Exposure(-r_true, c_cam, c_cam), nav, predicted, w, key)
+    nav, _ = ekf_update(nav, meas.z, predicted, meas.valid)
+    return nav
+
+
+def _image_step(sim: PNSimulation, law: AugmentedPNGuidance, key, record, carry: _Carry, i):
+    """One measurement interval: LOS image -> EKF update -> guidance steps -> covariance."""
+    dt = sim.context.dt_s
+    perfect = sim.nav_model == "perfect"
+    image_dt = dt * sim.steps_per_image
+    t = i * image_dt
+    if not perfect:
+        carry = carry._replace(
+            nav=take_image(sim, carry.nav, carry.truth.r, stream_key(key, _IMAGES, i))
+        )
+    noise = jax.random.normal(stream_key(key, _STEPS, i), (sim.steps_per_image, 2))
+    ts = t + dt * jnp.arange(sim.steps_per_image)
+    step = functools.partial(_control_step, sim, law, record)
+    carry, rec = jax.lax.scan(step, carry, (ts, noise))
+    if not perfect:
+        p = propagate_covariance(carry.nav.p, image_dt, sim.process_noise_m2s3, 0.0)
+        carry = carry._replace(nav=NavEstimate(carry.nav.x, p))
+    return carry, rec
 
 
 def simulate(
@@ -151,97 +257,12 @@ def simulate(
         key: this run's key, ``jax.random.fold_in(root, run_index)``.
         record: also return the guidance-rate :class:`PNRecord` trace (static).
     """
-    ctx = sim.context
-    err = sim.errors
-    dt = ctx.dt_s
-    h = ctx.reference_normal
     nav0, know_pos, know_vel = _initial_nav(sim, key)
-    flow_full = sim.engine.mass_flow(1.0)
-    perfect = sim.nav_model == "perfect"
-
-    def control_step(carry: _Carry, inputs):
-        t, noise = inputs  # two standard normals: the pointing error of a new firing
-        truth = carry.truth
-        nav = (
-            NavEstimate(jnp.concatenate([truth.r, truth.v]), carry.nav.p) if perfect else carry.nav
-        )
-        navsol = PNNavigation(nav.r, nav.v, truth.r_target)
-        command, law_state = law.step(carry.law_state, navsol, t, ctx)
-        on = law_state.engine_on
-        ignition = (on > 0.5) & (carry.on_prev <= 0.5)
-        fresh = err.attitude_rad * noise
-        pointing = jnp.where(ignition, fresh, carry.pointing_error)
-        if sim.planar:  # rotate within the orbit plane about its normal
-            d = command.direction
-            tilted = d + pointing[0] * jnp.cross(h, d)
-            direction = tilted / jnp.linalg.norm(tilted)
-        else:
-            direction = perturb_direction(command.direction, pointing)
-        throttle = command.throttle
-        thrust = throttle * sim.engine.thrust_n * direction
-        new_truth = propagate(sim.dynamics, truth, thrust, throttle * flow_full, dt, 1)
-        dv = thrust * dt / (0.5 * (truth.m + new_truth.m))
-        if not perfect:
-            # Executed Δv (perfect accelerometer) plus the modelled gravity over the step.
-            g = ctx.dynamics.relative_gravity(truth.r_target, nav.r)
-            nav = propagate_state(nav, dv + g * dt, dt)
-        fired = on > 0.5
-        # A firing is one pulse train of one thruster direction: reversing the thrust (the
-        # opposite thrusters) while the trigger stays on starts a new firing.
-        reversal = fired & (carry.on_prev > 0.5) & (jnp.dot(direction, carry.direction_prev) < 0)
-        new = _Carry(
-            truth=new_truth,
-            nav=nav,
-            law_state=law_state,
-            on_prev=on,
-            direction_prev=direction,
-            pointing_error=pointing,
-            dv_mps=carry.dv_mps + _safe_norm(dv),
-            firings=carry.firings + (ignition | reversal).astype(jnp.int32),
-            ignitions=carry.ignitions + ignition.astype(jnp.int32),
-            pulses=carry.pulses + fired.astype(jnp.int32),
-            last_firing_s=jnp.where(fired, t, carry.last_firing_s),
-        )
-        rec = None
-        if record:
-            rec = PNRecord(
-                t,
-                on,
-                law_state.command_mps2,
-                law_state.coefficient,
-                jnp.linalg.norm(truth.r),
-                truth.r,
-            )
-        return new, rec
-
-    image_dt = dt * sim.steps_per_image
-
-    def image_step(carry: _Carry, i):
-        t = i * image_dt
-        nav = carry.nav
-        if not perfect:
-            w = jax.random.normal(jax.random.fold_in(jax.random.fold_in(key, _IMAGES), i), (2,))
-            if sim.planar:
-                w = w * jnp.array([1.0, 0.0])  # the out-of-plane angle is exactly zero
-            # Camera at the estimated target direction; x_c = h x boresight lies in the plane.
-            c_cam = camera_attitude(-nav.r, h)
-            z = los_angles(c_cam, -carry.truth.r) + err.attitude_rad * w
-            nav, _ = update_los(nav, z, c_cam, jnp.maximum(err.attitude_rad, 1e-9))
-        carry = carry._replace(nav=nav)
-        k_steps = jax.random.fold_in(jax.random.fold_in(key, _STEPS), i)
-        noise = jax.random.normal(k_steps, (sim.steps_per_image, 2))
-        ts = t + dt * jnp.arange(sim.steps_per_image)
-        carry, rec = jax.lax.scan(control_step, carry, (ts, noise))
-        if not perfect:
-            p = propagate_covariance(carry.nav.p, image_dt, sim.process_noise_m2s3, 0.0)
-            carry = carry._replace(nav=NavEstimate(carry.nav.x, p))
-        return carry, rec
-
     z = jnp.zeros(())
     carry0 = _Carry(
         truth=sim.y0,
         nav=nav0,
-        law_state=law.init(None, ctx),
+        law_state=law.init(None, sim.context),
         on_prev=z,
         direction_prev=jnp.zeros(3),
         pointing_error=jnp.zeros(2),
@@ -251,14 +272,15 @@ def simulate(
         pulses=jnp.zeros((), jnp.int32),
         last_firing_s=z,
     )
+    image_step = functools.partial(_image_step, sim, law, key, record)
     carry, rec = jax.lax.scan(image_step, carry0, jnp.arange(sim.n_images))
 
     truth = carry.truth
     b, t_rest = coast_to_b_plane(sim.dynamics, truth, sim.c_bi, sim.coast_steps)
-    nav_r = truth.r if perfect else carry.nav.r
+    nav_r = truth.r if sim.nav_model == "perfect" else carry.nav.r
     outcome = PNOutcome(
         status=jnp.zeros((), jnp.int32),
-        miss_m=_safe_norm(b),
+        miss_m=safe_norm(b),
         miss_t_m=b[0],
         miss_r_m=b[1],
         dv_mps=carry.dv_mps,
@@ -271,13 +293,9 @@ def simulate(
         knowledge_position_error_m=know_pos,
         knowledge_velocity_error_mps=know_vel,
     )
-    status = jnp.where(
-        all_finite(outcome), jnp.where(t_rest > 0.0, Status.ok, Status.time_out), Status.nan
-    )
-    outcome = outcome._replace(status=status.astype(jnp.int32))
-    if record:
-        rec = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[2:]), rec)
-    return outcome, rec
+    # ``not (t_rest > 0)`` rather than ``t_rest <= 0``: a NaN coast time is a time-out too.
+    outcome = with_status(outcome, [(~(t_rest > 0.0), Status.time_out)])
+    return outcome, flatten_trace(rec)
 
 
 def initial_state(cfg: dict) -> tuple[InterceptState, bool]:
@@ -287,10 +305,6 @@ def initial_state(cfg: dict) -> tuple[InterceptState, bool]:
     mu_sun), and the Table 2 relative state (impactor minus target) expressed in the target's
     (radial, transverse, orbit-normal) frame: the planar case rotated onto Bennu's orbit.
     """
-    import numpy as np
-
-    from ..geometry.kepler import OrbitalElements, elements_to_state
-
     a = cfg["approach"]
     km = lambda x: np.asarray(x, float) * 1e3  # noqa: E731
     r_t, v_t = km(a["target_position_km"]), km(a["target_velocity_kmps"])
@@ -326,12 +340,6 @@ def initial_state(cfg: dict) -> tuple[InterceptState, bool]:
 def build(scenario) -> PNSimulation:
     """Simulation data of a validated intercept :class:`Scenario` (SI units); the law is built
     by the system from ``[guidance.apn]`` (``systems.intercept``)."""
-    import math
-
-    import numpy as np
-
-    from ..geometry.bplane import b_plane_frame
-
     cfg = scenario.config
     dy, sc, g, nv, er = (
         cfg[k] for k in ("dynamics", "spacecraft", "guidance", "navigation", "errors")
@@ -380,6 +388,7 @@ def build(scenario) -> PNSimulation:
         n_images=int(math.ceil(t_cut / image_dt - 1e-9)),
         steps_per_image=int(round(image_dt / g["dt_s"])),
         coast_steps=int(g["coast_steps"]),
+        measurement=GaussianLOSMeasurement(errors.attitude_rad, planar=planar),
     )
     return sim
 

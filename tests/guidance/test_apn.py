@@ -19,8 +19,8 @@ from gnc_jax.guidance.apn import (
     los_angle_rate,
     navigation_coefficient,
     pulse_train_estimate,
-    schmitt_trigger,
 )
+from gnc_jax.guidance.trigger import schmitt_trigger
 
 DYN = InterceptDynamics(jnp.asarray(MU_SUN), jnp.asarray(0.0), jnp.asarray(245.0))
 

@@ -1,0 +1,23 @@
+"""Measurement front ends: one abstract contract (``base.py``), one file per member."""
+
+from .base import (
+    AbstractMeasurement,
+    Exposure,
+    Measurement,
+    measurement_class,
+    register_measurement,
+)
+from .gaussian import GaussianLOSMeasurement
+from .image import ImageMeasurement, camera_model, target_model
+
+__all__ = [
+    "AbstractMeasurement",
+    "Exposure",
+    "Measurement",
+    "measurement_class",
+    "register_measurement",
+    "GaussianLOSMeasurement",
+    "ImageMeasurement",
+    "camera_model",
+    "target_model",
+]
