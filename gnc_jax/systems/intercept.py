@@ -175,9 +175,11 @@ class InterceptSystem(AbstractSystem):
         "firings_mean": "firings (mean)",
     }
     example = "bennu-apn"
-    # the last 2 h of the approach: acquisition, pulse trains and the coast
+    # a 2000 s approach, 10 km off, with proportionally smaller knowledge errors
     test_overrides: ClassVar[dict[str, Any]] = {
-        "approach.impactor_position_km": [1.34176e8, 73440.0 + 0.0, 0.0],
+        "approach.impactor_position_km": [1.3417501e8, 20400.0, 0.0],
+        "guidance.coast_s": 60.0,
+        "navigation.knowledge_position_km": [2.0, 0.2, 0.2],
     }
 
     def check(self, config):

@@ -107,9 +107,9 @@ def test_coast_to_b_plane_matches_the_reference_closest_approach(table2):
     """Unguided: the B-plane crossing equals the DOP853 pair's closest approach (planar)."""
     dyn = InterceptDynamics(jnp.asarray(MU_SUN), jnp.asarray(MU_T), jnp.asarray(245.0))
     sc = gj.load_scenario("bennu-apn-ideal")
-    from gnc_jax.simulation.pn import build
+    from gnc_jax.simulation.pn import build  # the simulation data only (no law)
 
-    sim, _ = build(sc)
+    sim = build(sc)
     b, t_b = jax.jit(lambda y: coast_to_b_plane(dyn, y, sim.c_bi, 400))(table2)
     rt, vt = np.asarray(table2.r_target), np.asarray(table2.v_target)
     s0 = np.concatenate([rt, vt, rt + np.asarray(table2.r), vt + np.asarray(table2.v)])

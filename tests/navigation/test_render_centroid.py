@@ -224,7 +224,7 @@ SHORT_IMAGE = [
     "errors.delivery_position_km=1.0",
     "navigation.knowledge_position_km=[20.0, 1.0, 1.0]",
     "guidance.retarget_tgo_s=300.0",
-    "guidance.burn_times_s=[150.0, 600.0, 700.0, 900.0]",
+    "guidance.predictive.burn_times_s=[150.0, 600.0, 700.0, 900.0]",
 ]
 
 
