@@ -403,7 +403,7 @@ class AutonomousCorrection(AbstractMidcourseGuidance):
         return command, state
 
     @classmethod
-    def from_config(cls, section: dict, config: dict, ctx: MidcourseGuidanceContext = None):
+    def from_config(cls, section: dict, config: dict, ctx: MidcourseGuidanceContext | None = None):
         """The law of a validated ``[guidance]`` section (SI); ``ctx`` (required) gives the
         number of targeted parameters."""
         f = lambda x: jnp.asarray(x, dtype=jnp.float64)

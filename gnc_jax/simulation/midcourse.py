@@ -6,9 +6,12 @@ The run starts at the first navigation fix (the paper's E-238 d) on the nominal 
 the initial (injection) error, then repeats the paper's cycle at every fix (seed 001 §3):
 
 1. the navigation system gives the state with its error (bias + random, per fix);
-2. the targeter predicts Q = (B_R, B_T[, t]) by integrating that state to the Mars encounter
-   and, unless the error is below the lower threshold (no burn) or above the upper one (flagged
-   for the ground, no burn), computes the Δv by Newton iteration (`guidance.targeting`);
+2. the guidance law (a member of the midcourse family, `guidance.targeting`; the scenario's is
+   `AutonomousCorrection`) is stepped on that state and the on-board predictor
+   (`MidcourseSimulation.guidance_context`): it predicts Q = (B_R, B_T[, t]) by integrating the
+   state to the Mars encounter and, unless the error is below the lower threshold (no burn) or
+   above the upper one (flagged for the ground, no burn), commands the Δv found by Newton
+   iteration;
 3. the Δv is executed with magnitude and pointing errors, and the true state is propagated to
    the next fix.
 
@@ -49,7 +52,6 @@ from ..guidance.targeting import (
     SENSITIVITY_METHODS,
     AbstractMidcourseGuidance,
     AbstractSensitivity,
-    MidcourseCommand,
     MidcourseGuidanceContext,
     NewtonTargeter,
     TargetingResult,
@@ -273,7 +275,14 @@ class _Cycle(NamedTuple):
     propagation_ok: Array
 
 
-def _fix(sim: MidcourseSimulation, law, ctx, key, cycle: _Cycle, i):
+def _fix(
+    sim: MidcourseSimulation,
+    law: AbstractMidcourseGuidance,
+    ctx: MidcourseGuidanceContext,
+    key: PRNGKeyArray,
+    cycle: _Cycle,
+    i,
+):
     """One navigation fix: navigate, let the law command, execute with errors, coast on."""
     t = sim.t_first_fix_s + i * sim.fix_interval_s
     nav = navigated_state(sim, key, i, cycle.x)
@@ -297,24 +306,18 @@ def _fix(sim: MidcourseSimulation, law, ctx, key, cycle: _Cycle, i):
         jnp.where(is_first, command.iterations, cycle.first_iterations),
         cycle.propagation_ok & (status == Status.ok),
     )
-    return cycle, (
-        dv_norm,
-        jnp.hypot(command.predicted_dq[0], command.predicted_dq[1]),
-        _record(t, command, dv_exec),
+    dq = command.predicted_dq
+    rec = FixRecord(
+        t_s=t,
+        predicted_dq=dq,
+        dv_command_mps=command.dv_mps,
+        dv_executed_mps=dv_exec,
+        corrected=command.burn,
+        ground=command.ground,
+        converged=command.converged,
+        iterations=command.iterations,
     )
-
-
-def _record(t, command: MidcourseCommand, dv_exec) -> FixRecord:
-    return FixRecord(
-        t,
-        command.predicted_dq,
-        command.dv_mps,
-        dv_exec,
-        command.burn,
-        command.ground,
-        command.converged,
-        command.iterations,
-    )
+    return cycle, (dv_norm, jnp.hypot(dq[0], dq[1]), rec)
 
 
 class _Flight(NamedTuple):
@@ -329,7 +332,9 @@ class _Flight(NamedTuple):
     record: Any
 
 
-def _fly_corrected(sim: MidcourseSimulation, law, key, x0: State6) -> _Flight:
+def _fly_corrected(
+    sim: MidcourseSimulation, law: AbstractMidcourseGuidance, key: PRNGKeyArray, x0: State6
+) -> _Flight:
     """The correction cycle over every fix, then the coast to the encounter."""
     ctx = sim.guidance_context
     t0 = sim.t_first_fix_s
