@@ -6,9 +6,12 @@ The run starts at the first navigation fix (the paper's E-238 d) on the nominal 
 the initial (injection) error, then repeats the paper's cycle at every fix (seed 001 §3):
 
 1. the navigation system gives the state with its error (bias + random, per fix);
-2. the targeter predicts Q = (B_R, B_T[, t]) by integrating that state to the Mars encounter
-   and, unless the error is below the lower threshold (no burn) or above the upper one (flagged
-   for the ground, no burn), computes the Δv by Newton iteration (`guidance.targeting`);
+2. the guidance law (a member of the midcourse family, `guidance.targeting`; the scenario's is
+   `AutonomousCorrection`) is stepped on that state and the on-board predictor
+   (`MidcourseSimulation.guidance_context`): it predicts Q = (B_R, B_T[, t]) by integrating the
+   state to the Mars encounter and, unless the error is below the lower threshold (no burn) or
+   above the upper one (flagged for the ground, no burn), commands the Δv found by Newton
+   iteration;
 3. the Δv is executed with magnitude and pointing errors, and the true state is propagated to
    the next fix.
 
@@ -18,30 +21,46 @@ Epochs are seconds past J2000 TDB; the arrival-time target is relative to the no
 encounter epoch. Everything is SI.
 """
 
-from typing import NamedTuple
+import functools
+import math
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._status import Status, all_finite
-from .._types import Array, Float, PRNGKeyArray, Scalar, Vector3
+from .._status import Status
+from .._types import Array, Float, PRNGKeyArray, Scalar, State6, Vector3
+from ..dynamics.ephemeris import (
+    ECLIPTIC_POLE_EQUATORIAL,
+    GM_PLANETS,
+    GM_SUN,
+    planet_index,
+    planet_state,
+)
 from ..dynamics.heliocentric import (
+    SOLAR_PRESSURE_1AU,
     EphemerisTable,
     HeliocentricModel,
     propagate,
-    propagate_to_encounter,
-    propagate_to_encounter_with_stm,
     propagate_with_stm,
-    relative_state,
 )
-from ..geometry.hyperbola import b_plane_hyperbolic
+from ..geometry.bplane import BPlaneError, check_b_plane_frame
+from ..geometry.kepler import propagate_kepler
+from ..geometry.lambert import solve_lambert
 from ..guidance.targeting import (
-    AutonomousCorrection,
+    SENSITIVITY_METHODS,
+    AbstractMidcourseGuidance,
+    AbstractSensitivity,
+    MidcourseGuidanceContext,
     NewtonTargeter,
+    TargetingResult,
     jacobian_autodiff,
     jacobian_central_difference,
 )
+from ..scenario import ScenarioError
+from ..scenario.midcourse import epochs_s
+from .base import with_status
 
 
 class MidcourseErrors(eqx.Module):
@@ -74,7 +93,8 @@ class MidcourseErrors(eqx.Module):
 
 
 class MidcourseSimulation(eqx.Module):
-    """Everything one run needs except the guidance (`AutonomousCorrection`) and the key.
+    """Everything one run needs except the guidance law (an `AbstractMidcourseGuidance`) and
+    the key.
 
     Attributes:
         model: heliocentric force model and integrator.
@@ -110,6 +130,17 @@ class MidcourseSimulation(eqx.Module):
     @property
     def fixed_arrival(self) -> bool:
         return self.aim.shape[0] == 3
+
+    @property
+    def guidance_context(self) -> MidcourseGuidanceContext:
+        """The on-board predictor the guidance law works with (same model, aim and window)."""
+        return MidcourseGuidanceContext(
+            model=self.model,
+            aim=self.aim,
+            ref_normal=self.ref_normal,
+            t_encounter_s=self.t_encounter_s,
+            t_max_s=self.t_max_s,
+        )
 
 
 class MidcourseOutcome(NamedTuple):
@@ -162,51 +193,19 @@ def _normal(key, stream, shape=(3,)):
 
 
 def terminal_parameters(sim: MidcourseSimulation, t_s, state) -> Float[Array, "3"]:
-    """(B_R, B_T, t_arrival - t_encounter) of a heliocentric state near the encounter.
-
-    The arrival time is the epoch plus the linearised time of flight to periapsis (seed 001
-    eqs. 27-32); all components are planet-relative two-body constants (`geometry.hyperbola`).
-    The targeted Q is the first n = ``sim.aim.shape[0]`` components.
-    """
-    r_rel, v_rel = relative_state(sim.model, t_s, state)
-    bp = b_plane_hyperbolic(r_rel, v_rel, sim.model.gm_target, sim.ref_normal)
-    return jnp.stack([bp.b_r, bp.b_t, (t_s - sim.t_encounter_s) + bp.t_tof])
+    """(B_R, B_T, t_arrival - t_encounter) of a heliocentric state near the encounter
+    (`MidcourseGuidanceContext.terminal_parameters`)."""
+    return sim.guidance_context.terminal_parameters(t_s, state)
 
 
 def predict(sim: MidcourseSimulation, t_s, state) -> tuple[Float[Array, "3"], Array]:
     """``(terminal parameters, status)`` of the trajectory through ``state`` at ``t_s``."""
-    enc = propagate_to_encounter(sim.model, t_s, state, sim.t_max_s)
-    return terminal_parameters(sim, enc.t_s, enc.state), enc.status
+    return sim.guidance_context.predict(t_s, state)
 
 
-def q_function(sim: MidcourseSimulation, t_s, state):
-    """P = Δv (m/s, EME2000) applied at ``t_s`` -> Q: the on-board predictor of the targeter."""
-    n = sim.aim.shape[0]
-    return lambda dv: predict(sim, t_s, state.at[3:].add(dv))[0][:n]
-
-
-def q_and_stm_jacobian(sim: MidcourseSimulation, t_s, state):
-    """Δv -> (Q, K) with K = ∂Q/∂X_f Φ(t_f, t) ∂X/∂Δv (seed 001 eq. 22) from the variational
-    equations; ∂Q/∂X_f is the derivative of the closed-form B-plane formulas at fixed t_f."""
-
-    def q_and_k(dv):
-        enc, phi_v = propagate_to_encounter_with_stm(
-            sim.model, t_s, state.at[3:].add(dv), sim.t_max_s
-        )
-        q_of_x = lambda x: terminal_parameters(sim, enc.t_s, x)[: sim.aim.shape[0]]
-        return q_of_x(enc.state), jax.jacfwd(q_of_x)(enc.state) @ phi_v
-
-    return q_and_k
-
-
-def sensitivity(sim: MidcourseSimulation, method: str, t_s, state, epsilon=1e-3):
-    """``(Q, K = ∂Q/∂Δv)`` at ``state`` (epoch ``t_s``) by ``method`` (`SENSITIVITIES`)."""
-    dv0 = jnp.zeros(3)
-    if method == "autodiff":
-        return jacobian_autodiff(q_function(sim, t_s, state), dv0)
-    if method == "central_difference":
-        return jacobian_central_difference(q_function(sim, t_s, state), dv0, epsilon)
-    return q_and_stm_jacobian(sim, t_s, state)(dv0)
+def sensitivity(sim: MidcourseSimulation, method: AbstractSensitivity, t_s, state):
+    """``(Q, K = ∂Q/∂Δv)`` at ``state`` (epoch ``t_s``, zero Δv) by ``method``."""
+    return method.q_and_jacobian(sim.guidance_context.problem(t_s, state), jnp.zeros(3))
 
 
 def _safe_norm(x):
@@ -232,14 +231,140 @@ def execute_burn(dv: Vector3, errors: MidcourseErrors, noise: Float[Array, "3"])
     return magnitude * scale * tilted
 
 
-def _solve_correction(sim, law: AutonomousCorrection, t_s, state):
-    stm = q_and_stm_jacobian(sim, t_s, state) if law.targeter.sensitivity == "stm" else None
-    return law.targeter.solve(q_function(sim, t_s, state), sim.aim, jnp.zeros(3), stm)
+def _solve_correction(sim, law, t_s, state) -> TargetingResult:
+    """The law's Newton solution at ``state`` (``benchmarks/midcourse.py`` times it)."""
+    return law.targeter.solve(sim.guidance_context.problem(t_s, state), sim.aim, jnp.zeros(3))
+
+
+def initial_state(sim: MidcourseSimulation, key: PRNGKeyArray):
+    """``(x0, dr, dv)``: the dispersed true state at the first fix and its position and velocity
+    errors (offset + 1-sigma draw per axis)."""
+    err = sim.errors
+    dr = err.position_offset_m + err.position_m * _normal(key, _INITIAL_POSITION)
+    dv = err.velocity_offset_mps + err.velocity_mps * _normal(key, _INITIAL_VELOCITY)
+    return jnp.concatenate([sim.r0_m + dr, sim.v0_mps + dv]), dr, dv
+
+
+def navigated_state(sim: MidcourseSimulation, key: PRNGKeyArray, i, x: State6) -> State6:
+    """The navigation system's state at fix ``i``: the true ``x`` plus bias + random error,
+    scaled by ``final_fix_scale`` at the last fix."""
+    err = sim.errors
+    scale = jnp.where(i == sim.n_fixes - 1, err.final_fix_scale, 1.0)
+    k_nav = jax.random.fold_in(jax.random.fold_in(key, _NAVIGATION), i)
+    noise = jax.random.normal(k_nav, (6,))
+    nav_error = jnp.concatenate(
+        [
+            err.nav_position_bias_m + err.nav_position_m * noise[:3],
+            err.nav_velocity_bias_mps + err.nav_velocity_mps * noise[3:],
+        ]
+    )
+    return x + scale * nav_error
+
+
+class _Cycle(NamedTuple):
+    """Carry of the scan over the fixes."""
+
+    x: State6  # true state
+    law_state: Any
+    dv_total: Scalar
+    corrections: Array
+    ground_calls: Array
+    failed: Array  # a correction was needed but the targeter did not converge
+    first_dv: Scalar
+    first_iterations: Array
+    propagation_ok: Array
+
+
+def _fix(
+    sim: MidcourseSimulation,
+    law: AbstractMidcourseGuidance,
+    ctx: MidcourseGuidanceContext,
+    key: PRNGKeyArray,
+    cycle: _Cycle,
+    i,
+):
+    """One navigation fix: navigate, let the law command, execute with errors, coast on."""
+    t = sim.t_first_fix_s + i * sim.fix_interval_s
+    nav = navigated_state(sim, key, i, cycle.x)
+    command, law_state = law.step(cycle.law_state, nav, t, ctx)
+    k_exec = jax.random.fold_in(jax.random.fold_in(key, _EXECUTION), i)
+    dv_exec = execute_burn(command.dv_mps, sim.errors, jax.random.normal(k_exec, (3,)))
+    dv_norm = _safe_norm(dv_exec)
+    is_first = command.burn & (cycle.corrections == 0)
+    x = cycle.x.at[3:].add(dv_exec)
+    # Coast to the next fix (the last fix's state is the one propagated to encounter).
+    t_next = jnp.where(i == sim.n_fixes - 1, t, t + sim.fix_interval_s)
+    x, status = propagate(sim.model, t, x, t_next)
+    cycle = _Cycle(
+        x,
+        law_state,
+        cycle.dv_total + dv_norm,
+        cycle.corrections + command.burn.astype(jnp.int32),
+        cycle.ground_calls + command.ground.astype(jnp.int32),
+        cycle.failed | command.no_convergence,
+        jnp.where(is_first, dv_norm, cycle.first_dv),
+        jnp.where(is_first, command.iterations, cycle.first_iterations),
+        cycle.propagation_ok & (status == Status.ok),
+    )
+    dq = command.predicted_dq
+    rec = FixRecord(
+        t_s=t,
+        predicted_dq=dq,
+        dv_command_mps=command.dv_mps,
+        dv_executed_mps=dv_exec,
+        corrected=command.burn,
+        ground=command.ground,
+        converged=command.converged,
+        iterations=command.iterations,
+    )
+    return cycle, (dv_norm, jnp.hypot(dq[0], dq[1]), rec)
+
+
+class _Flight(NamedTuple):
+    """The flown transfer: the cycle's totals, the encounter and the per-fix series."""
+
+    cycle: _Cycle
+    q: Float[Array, "3"]  # terminal parameters of the flown trajectory
+    status: Array  # its propagation status
+    dv_ref: Scalar
+    dv_per_fix: Float[Array, " fixes"]
+    b_pred: Float[Array, " fixes"]
+    record: Any
+
+
+def _fly_corrected(
+    sim: MidcourseSimulation, law: AbstractMidcourseGuidance, key: PRNGKeyArray, x0: State6
+) -> _Flight:
+    """The correction cycle over every fix, then the coast to the encounter."""
+    ctx = sim.guidance_context
+    t0 = sim.t_first_fix_s
+    z, zi = jnp.zeros(()), jnp.zeros((), jnp.int32)
+    law_state = law.init(navigated_state(sim, key, 0, x0), ctx)
+    cycle0 = _Cycle(x0, law_state, z, zi, zi, jnp.array(False), z, zi, jnp.array(True))
+    fix = functools.partial(_fix, sim, law, ctx, key)
+    cycle, (dv_per_fix, b_pred, rec) = jax.lax.scan(fix, cycle0, jnp.arange(sim.n_fixes))
+    t_last = t0 + (sim.n_fixes - 1) * sim.fix_interval_s
+    q1, status1 = predict(sim, t_last, cycle.x)
+    if sim.reference_dv:
+        # The error-free correction: the law's targeted Δv from the true initial state.
+        command, _ = law.step(law.init(x0, ctx), x0, t0, ctx)
+        dv_ref = _safe_norm(command.dv_targeted_mps)
+    else:
+        dv_ref = cycle.first_dv
+    return _Flight(cycle, q1, status1, dv_ref, dv_per_fix, b_pred, rec)
+
+
+def _fly_uncorrected(sim: MidcourseSimulation, x0: State6, q0, status0) -> _Flight:
+    """No guidance: the flown trajectory is the initial one."""
+    z, zi = jnp.zeros(()), jnp.zeros((), jnp.int32)
+    cycle = _Cycle(x0, None, z, zi, zi, jnp.array(False), z, zi, jnp.array(True))
+    b_pred = jnp.full(sim.n_fixes, jnp.hypot(q0[0] - sim.aim[0], q0[1] - sim.aim[1]))
+    return _Flight(cycle, q0, status0, z, jnp.zeros(sim.n_fixes), b_pred, None)
 
 
 def simulate(
     sim: MidcourseSimulation,
-    law: AutonomousCorrection,
+    law: AbstractMidcourseGuidance,
     key: PRNGKeyArray,
     record: bool = False,
 ) -> tuple[MidcourseOutcome, FixRecord | None]:
@@ -247,82 +372,29 @@ def simulate(
 
     Args:
         sim: scenario data (see `MidcourseSimulation`).
-        law: the correction rule and its targeter (`AutonomousCorrection`).
+        law: the midcourse guidance law (e.g. `AutonomousCorrection`), stepped at every fix.
         key: this run's key, ``jax.random.fold_in(root, run_index)``.
         record: also return the per-fix `FixRecord` trace (static).
 
     Returns:
         ``(outcome, trace)``; ``trace`` is ``None`` unless ``record``.
     """
-    err = sim.errors
-    dr = err.position_offset_m + err.position_m * _normal(key, _INITIAL_POSITION)
-    dv = err.velocity_offset_mps + err.velocity_mps * _normal(key, _INITIAL_VELOCITY)
-    x0 = jnp.concatenate([sim.r0_m + dr, sim.v0_mps + dv])
-    t0 = sim.t_first_fix_s
-    q0, status0 = predict(sim, t0, x0)
-
-    def fix(carry, i):
-        x, dv_total, count, ground_count, failed, first_dv, first_iter, prop_ok = carry
-        t = t0 + i * sim.fix_interval_s
-        scale = jnp.where(i == sim.n_fixes - 1, err.final_fix_scale, 1.0)
-        k_nav = jax.random.fold_in(jax.random.fold_in(key, _NAVIGATION), i)
-        noise = jax.random.normal(k_nav, (6,))
-        nav_error = jnp.concatenate(
-            [
-                err.nav_position_bias_m + err.nav_position_m * noise[:3],
-                err.nav_velocity_bias_mps + err.nav_velocity_mps * noise[3:],
-            ]
-        )
-        result = _solve_correction(sim, law, t, x + scale * nav_error)
-        dq = result.q_initial - sim.aim
-        correct, ground = law.decide(dq)
-        burn = correct & result.converged
-        dv_command = jnp.where(burn, result.p, 0.0)
-        k_exec = jax.random.fold_in(jax.random.fold_in(key, _EXECUTION), i)
-        dv_exec = execute_burn(dv_command, err, jax.random.normal(k_exec, (3,)))
-        dv_norm = _safe_norm(dv_exec)
-        is_first = burn & (count == 0)
-        x = x.at[3:].add(dv_exec)
-        # Coast to the next fix (the last fix's state is the one propagated to encounter).
-        t_next = jnp.where(i == sim.n_fixes - 1, t, t + sim.fix_interval_s)
-        x, status = propagate(sim.model, t, x, t_next)
-        carry = (
-            x,
-            dv_total + dv_norm,
-            count + burn.astype(jnp.int32),
-            ground_count + ground.astype(jnp.int32),
-            failed | (correct & ~result.converged),
-            jnp.where(is_first, dv_norm, first_dv),
-            jnp.where(is_first, result.iterations, first_iter),
-            prop_ok & (status == Status.ok),
-        )
-        rec = FixRecord(
-            t, dq, dv_command, dv_exec, burn, ground, result.converged, result.iterations
-        )
-        return carry, (dv_norm, jnp.hypot(dq[0], dq[1]), rec)
-
-    z, zi = jnp.zeros(()), jnp.zeros((), jnp.int32)
+    x0, dr, dv = initial_state(sim, key)
+    q0, status0 = predict(sim, sim.t_first_fix_s, x0)
     if sim.guidance_enabled:
-        carry0 = (x0, z, zi, zi, jnp.array(False), z, zi, jnp.array(True))
-        carry, (dv_per_fix, b_pred, rec) = jax.lax.scan(fix, carry0, jnp.arange(sim.n_fixes))
-        x_last, dv_total, count, ground_count, failed, first_dv, first_iter, prop_ok = carry
-        t_last = t0 + (sim.n_fixes - 1) * sim.fix_interval_s
-        q1, status1 = predict(sim, t_last, x_last)
-        if sim.reference_dv:
-            dv_ref = _safe_norm(_solve_correction(sim, law, t0, x0).p)
-        else:
-            dv_ref = first_dv
+        flight = _fly_corrected(sim, law, key, x0)
     else:
-        q1, status1 = q0, status0
-        dv_total, first_dv, dv_ref = z, z, z
-        count, ground_count, first_iter = zi, zi, zi
-        failed, prop_ok = jnp.array(False), jnp.array(True)
-        dv_per_fix = jnp.zeros(sim.n_fixes)
-        b_pred = jnp.full(sim.n_fixes, jnp.hypot(q0[0] - sim.aim[0], q0[1] - sim.aim[1]))
-        rec = None
+        flight = _fly_uncorrected(sim, x0, q0, status0)
+    outcome = _outcome(sim, q0, status0, flight, dr, dv)
+    return outcome, (flight.record if record else None)
 
+
+def _outcome(sim: MidcourseSimulation, q0, status0, flight: _Flight, dr, dv) -> MidcourseOutcome:
+    """The run's outcome and its status: ``nan`` (not finite, or a coast between fixes
+    failed), else the worse propagation status to the encounter, else ``no_convergence``."""
+    cycle, dv_ref = flight.cycle, flight.dv_ref
     aim3 = jnp.concatenate([sim.aim, jnp.zeros(3 - sim.aim.shape[0])])
-    d0, d1 = q0 - aim3, q1 - aim3
+    d0, d1 = q0 - aim3, flight.q - aim3
     b0, b1 = jnp.hypot(d0[0], d0[1]), jnp.hypot(d1[0], d1[1])
     safe_ref = jnp.where(dv_ref > 0.0, dv_ref, 1.0)
     outcome = MidcourseOutcome(
@@ -336,25 +408,25 @@ def simulate(
         b0_err_t_m=d0[1],
         tof0_err_s=d0[2],
         goal_met=(b1 < sim.goal[0]) & (jnp.abs(d1[2]) < sim.goal[1]),
-        dv_mps=dv_total,
-        dv_first_mps=first_dv,
+        dv_mps=cycle.dv_total,
+        dv_first_mps=cycle.first_dv,
         dv_ref_mps=dv_ref,
-        dv_increase_pct=jnp.where(dv_ref > 0.0, 100.0 * (dv_total / safe_ref - 1.0), 0.0),
-        corrections=count,
-        ground_calls=ground_count,
-        iterations=first_iter,
-        dv_per_fix_mps=dv_per_fix,
-        predicted_b_err_m=b_pred,
+        dv_increase_pct=jnp.where(dv_ref > 0.0, 100.0 * (cycle.dv_total / safe_ref - 1.0), 0.0),
+        corrections=cycle.corrections,
+        ground_calls=cycle.ground_calls,
+        iterations=cycle.first_iterations,
+        dv_per_fix_mps=flight.dv_per_fix,
+        predicted_b_err_m=flight.b_pred,
         initial_position_error_m=dr,
         initial_velocity_error_mps=dv,
     )
-    finite = all_finite(outcome)
-    bad_status = jnp.maximum(status0, status1)
-    converged = jnp.where(failed, Status.no_convergence, Status.ok)
-    status = jnp.where(bad_status != Status.ok, bad_status, converged)
-    status = jnp.where(~finite | ~prop_ok, Status.nan, status)
-    outcome = outcome._replace(status=status.astype(jnp.int32))
-    return outcome, (rec if record else None)
+    bad_status = jnp.maximum(status0, flight.status)
+    failures = (
+        (~cycle.propagation_ok, Status.nan),
+        (bad_status != Status.ok, bad_status),
+        (cycle.failed, Status.no_convergence),
+    )
+    return with_status(outcome, failures)
 
 
 class NominalTransfer(NamedTuple):
@@ -371,7 +443,7 @@ class NominalTransfer(NamedTuple):
 @eqx.filter_jit
 def _retarget(sim: MidcourseSimulation, targeter: NewtonTargeter):
     x = jnp.concatenate([sim.r0_m, sim.v0_mps])
-    return targeter.solve(q_function(sim, sim.t_first_fix_s, x), sim.aim, jnp.zeros(3))
+    return targeter.solve(sim.guidance_context.problem(sim.t_first_fix_s, x), sim.aim, jnp.zeros(3))
 
 
 _NOMINAL_CACHE: dict = {}
@@ -390,11 +462,6 @@ def design_nominal(sim: MidcourseSimulation, t_launch_s: float) -> NominalTransf
     process, keyed by every input. Raises `BPlaneError` when the arrival asymptote is parallel
     to the reference normal and ``ValueError`` when step 3 does not converge.
     """
-    from ..dynamics.ephemeris import GM_SUN, planet_index, planet_state
-    from ..geometry.bplane import check_b_plane_frame
-    from ..geometry.kepler import propagate_kepler
-    from ..geometry.lambert import solve_lambert
-
     # Only the model, epochs, aim and reference plane matter; everything else is reset so that
     # every scenario variant shares one compiled design function and one cached result.
     aim3 = jnp.concatenate([sim.aim[:2], jnp.zeros(1)])
@@ -447,8 +514,6 @@ def design_nominal(sim: MidcourseSimulation, t_launch_s: float) -> NominalTransf
 
 def reference_normal(plane: str, t_encounter_s: float) -> Vector3:
     """Normal of the B-plane reference plane in EME2000 (SPEC §1)."""
-    from ..dynamics.ephemeris import ECLIPTIC_POLE_EQUATORIAL, planet_index, planet_state
-
     if plane == "ecliptic":
         return jnp.asarray(ECLIPTIC_POLE_EQUATORIAL)
     if plane == "equator":
@@ -458,42 +523,15 @@ def reference_normal(plane: str, t_encounter_s: float) -> Vector3:
     return h / jnp.linalg.norm(h)
 
 
-def build(scenario) -> tuple[MidcourseSimulation, AutonomousCorrection]:
-    """Simulation data and correction rule of a validated midcourse :class:`Scenario` (SI).
-
-    Designs the nominal transfer (`design_nominal`, cached) before returning; a nominal that
-    cannot be targeted raises :class:`ScenarioError`.
-    """
-    import math
-
-    from ..dynamics.ephemeris import GM_PLANETS
-    from ..dynamics.heliocentric import SOLAR_PRESSURE_1AU
-    from ..geometry.bplane import BPlaneError
-    from ..scenario import ScenarioError
-    from ..scenario.midcourse import epochs_s
-
-    cfg = scenario.config
-    mi, sc, dy, di, nv, ex, g, goal = (
-        cfg[k]
-        for k in (
-            "mission",
-            "spacecraft",
-            "dynamics",
-            "dispersion",
-            "navigation",
-            "execution",
-            "guidance",
-            "goal",
-        )
-    )
+def _model(cfg: dict, t: dict[str, float], t_max_s: float) -> HeliocentricModel:
+    """The heliocentric force model of a validated configuration (SI)."""
+    sc, dy = cfg["spacecraft"], cfg["dynamics"]
     f = lambda x: jnp.asarray(x, dtype=jnp.float64)  # noqa: E731
-    t = epochs_s(cfg)
-    t_max = t["encounter_epoch"] + dy["window_days"] * 86400.0
     srp = sc["reflectivity"] * sc["srp_area_m2"] / sc["mass_kg"] if dy["srp"] else 0.0
     table = None
     if dy["ephemeris"] == "table":
-        table = EphemerisTable.spanning(t["first_fix_epoch"], t_max)
-    model = HeliocentricModel(
+        table = EphemerisTable.spanning(t["first_fix_epoch"], t_max_s)
+    return HeliocentricModel(
         ephemeris=table,
         gm_planets=f(GM_PLANETS if dy["planets"] else [0.0] * 8),
         srp_m2_per_kg=f(srp),
@@ -503,11 +541,13 @@ def build(scenario) -> tuple[MidcourseSimulation, AutonomousCorrection]:
         solver=dy["solver"],
         max_steps=int(dy["max_steps"]),
     )
-    aim_bt_br = f(mi["aim_b_km"]) * 1e3
-    aim = jnp.stack([aim_bt_br[1], aim_bt_br[0]])  # Q order: (B_R, B_T[, t])
-    if g["targets"] == "b_plane_tof":
-        aim = jnp.concatenate([aim, jnp.zeros(1)])
-    errors = MidcourseErrors(
+
+
+def _errors(cfg: dict) -> MidcourseErrors:
+    """The error sources of a validated configuration (SI)."""
+    di, nv, ex = cfg["dispersion"], cfg["navigation"], cfg["execution"]
+    f = lambda x: jnp.asarray(x, dtype=jnp.float64)  # noqa: E731
+    return MidcourseErrors(
         position_m=f(di["position_km"] * 1e3),
         velocity_mps=f(di["velocity_mps"]),
         position_offset_m=f(di["position_offset_km"]) * 1e3,
@@ -521,7 +561,12 @@ def build(scenario) -> tuple[MidcourseSimulation, AutonomousCorrection]:
         magnitude_sigma=f(ex["magnitude_sigma_pct"] / 100.0),
         pointing_sigma_rad=f(math.radians(ex["pointing_sigma_deg"])),
     )
-    has_errors = any(
+
+
+def _has_errors(cfg: dict) -> bool:
+    """Whether navigation or execution errors are on (then the Δv baseline is solved apart)."""
+    nv, ex = cfg["navigation"], cfg["execution"]
+    return any(
         v != 0.0
         for v in (
             nv["position_sigma_km"],
@@ -533,8 +578,22 @@ def build(scenario) -> tuple[MidcourseSimulation, AutonomousCorrection]:
             ex["pointing_sigma_deg"],
         )
     )
-    sim = MidcourseSimulation(
-        model=model,
+
+
+def _simulation(cfg: dict) -> MidcourseSimulation:
+    """The simulation data of a validated configuration, before the nominal is designed."""
+    mi, dy, nv, g, goal = (
+        cfg[k] for k in ("mission", "dynamics", "navigation", "guidance", "goal")
+    )
+    f = lambda x: jnp.asarray(x, dtype=jnp.float64)  # noqa: E731
+    t = epochs_s(cfg)
+    t_max = t["encounter_epoch"] + dy["window_days"] * 86400.0
+    aim_bt_br = f(mi["aim_b_km"]) * 1e3
+    aim = jnp.stack([aim_bt_br[1], aim_bt_br[0]])  # Q order: (B_R, B_T[, t])
+    if g["targets"] == "b_plane_tof":
+        aim = jnp.concatenate([aim, jnp.zeros(1)])
+    return MidcourseSimulation(
+        model=_model(cfg, t, t_max),
         r0_m=jnp.zeros(3),
         v0_mps=jnp.zeros(3),
         t_first_fix_s=f(t["first_fix_epoch"]),
@@ -544,34 +603,34 @@ def build(scenario) -> tuple[MidcourseSimulation, AutonomousCorrection]:
         aim=aim,
         ref_normal=reference_normal(mi["reference_plane"], t["encounter_epoch"]),
         goal=f([goal["b_km"] * 1e3, goal["tof_s"]]),
-        errors=errors,
+        errors=_errors(cfg),
         n_fixes=int(nv["fixes"]),
         guidance_enabled=bool(g["enabled"]),
-        reference_dv=bool(g["enabled"] and has_errors),
+        reference_dv=bool(g["enabled"] and _has_errors(cfg)),
     )
+
+
+def build(scenario) -> tuple[MidcourseSimulation, AbstractMidcourseGuidance]:
+    """Simulation data and guidance law of a validated midcourse :class:`Scenario` (SI).
+
+    Designs the nominal transfer (`design_nominal`, cached) before returning; a nominal that
+    cannot be targeted raises :class:`ScenarioError`. The law is the midcourse family's
+    ``"autonomous"`` member (the scenario has one correction rule).
+    """
+    cfg = scenario.config
+    sim = _simulation(cfg)
+    plane = cfg["mission"]["reference_plane"]
     try:
-        nominal = design_nominal(sim, t["launch_epoch"])
+        nominal = design_nominal(sim, epochs_s(cfg)["launch_epoch"])
     except BPlaneError as error:
-        raise ScenarioError(
-            f"mission.reference_plane: {mi['reference_plane']!r}: {error}"
-        ) from None
+        raise ScenarioError(f"mission.reference_plane: {plane!r}: {error}") from None
     except ValueError as error:
         raise ScenarioError(
             f"mission: {error}; allowed: epochs and aim point of a feasible transfer"
         ) from None
     sim = eqx.tree_at(lambda s: (s.r0_m, s.v0_mps), sim, (nominal.r0_m, nominal.v0_mps))
-    tolerance = f([g["tolerance_b_km"] * 1e3, g["tolerance_b_km"] * 1e3, g["tolerance_tof_s"]])
-    targeter = NewtonTargeter(
-        tolerance=tolerance[: aim.shape[0]],
-        epsilon=f(g["epsilon_mps"]),
-        sensitivity=g["sensitivity"],
-        iterations=int(g["iterations"]),
-    )
-    law = AutonomousCorrection(
-        targeter=targeter,
-        lower=f([g["lower_b_km"] * 1e3, g["lower_tof_s"]]),
-        upper=f([g["upper_b_km"] * 1e3, g["upper_tof_s"]]),
-    )
+    law_class = AbstractMidcourseGuidance.laws["autonomous"]
+    law = law_class.from_config(cfg["guidance"], cfg, sim.guidance_context)
     return sim, law
 
 
@@ -590,7 +649,7 @@ def partials_vs_step(sim: MidcourseSimulation, epsilons: Float[Array, " e"]):
     """
     sim = _full_targets(sim)
     x = jnp.concatenate([sim.r0_m, sim.v0_mps])
-    q = q_function(sim, sim.t_first_fix_s, x)
+    q = sim.guidance_context.problem(sim.t_first_fix_s, x).q
     k_cd = jax.vmap(lambda e: jacobian_central_difference(q, jnp.zeros(3), e)[1])(epsilons)
     return k_cd, jacobian_autodiff(q, jnp.zeros(3))[1]
 
@@ -625,12 +684,13 @@ def partials_vs_time(sim: MidcourseSimulation, epochs_s: Float[Array, " k"], eps
     sim = _full_targets(sim)
     x0 = jnp.concatenate([sim.r0_m, sim.v0_mps])
 
+    methods = {
+        name: cls.from_config({"epsilon_mps": epsilon}) for name, cls in SENSITIVITY_METHODS.items()
+    }
+
     def at(t):
         x, _ = propagate(sim.model, sim.t_first_fix_s, x0, t)
-        out = {
-            method: sensitivity(sim, method, t, x, epsilon)[1]
-            for method in ("autodiff", "central_difference", "stm")
-        }
+        out = {name: sensitivity(sim, method, t, x)[1] for name, method in methods.items()}
         fixed = q_and_stm_jacobian_fixed_epoch(sim, t, x, t_end_s)
         out["stm_fixed_epoch"] = fixed(jnp.zeros(3))[1]
         return out

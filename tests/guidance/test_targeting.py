@@ -11,9 +11,17 @@ import pytest
 import gnc_jax as gj
 from gnc_jax.guidance.targeting import (
     SENSITIVITIES,
+    SENSITIVITY_METHODS,
+    AbstractMidcourseGuidance,
+    AutodiffSensitivity,
+    AutonomousCorrection,
+    CentralDifferenceSensitivity,
+    FunctionProblem,
     NewtonTargeter,
+    STMSensitivity,
     solve_linear_targeting,
 )
+from gnc_jax.scenario.midcourse import SCHEMA
 from gnc_jax.simulation import midcourse
 
 
@@ -42,13 +50,46 @@ def _toy_with_jacobian(p):
     return _toy_map(p), jax.jacfwd(_toy_map)(p)  # stands in for the variational equations
 
 
+def _member(name, epsilon=1e-6):
+    """The registered sensitivity method ``name``, built as ``build`` builds it."""
+    return SENSITIVITY_METHODS[name].from_config({"sensitivity": name, "epsilon_mps": epsilon})
+
+
+def test_registry_holds_the_scenario_names():
+    """Every name the scenario schema allows is a registered method, and nothing else."""
+    assert SENSITIVITIES == tuple(SENSITIVITY_METHODS)
+    assert set(SENSITIVITIES) == set(SCHEMA["guidance"]["sensitivity"].choices)
+    assert [type(_member(n)) for n in ("autodiff", "central_difference", "stm")] == [
+        AutodiffSensitivity,
+        CentralDifferenceSensitivity,
+        STMSensitivity,
+    ]
+    assert float(_member("central_difference", 2e-4).epsilon) == 2e-4
+    assert AbstractMidcourseGuidance.laws["autonomous"] is AutonomousCorrection
+
+
+def test_stm_without_variational_equations_is_an_error():
+    targeter = NewtonTargeter(tolerance=jnp.full(3, 1e-10), sensitivity=STMSensitivity())
+    with pytest.raises(ValueError, match="no variational equations"):
+        targeter.solve(FunctionProblem(_toy_map), jnp.ones(3), jnp.zeros(3))
+
+
+def test_central_difference_step_is_differentiable():
+    """ε is an array leaf: d K / d ε of a cubic is the closed form 2 ε (K_cd = 3p² + ε²)."""
+    problem = FunctionProblem(lambda p: p**3)
+    k_of = lambda e: CentralDifferenceSensitivity(e).q_and_jacobian(problem, jnp.ones(1))[1][0, 0]
+    np.testing.assert_allclose(k_of(0.1), 3.0 + 0.01, rtol=1e-12)
+    np.testing.assert_allclose(jax.grad(k_of)(0.1), 0.2, rtol=1e-9)
+
+
 @pytest.mark.parametrize("method", SENSITIVITIES)
 def test_newton_converges_and_vmaps_like_a_loop(method):
     targeter = NewtonTargeter(
-        tolerance=jnp.full(3, 1e-10), epsilon=1e-6, sensitivity=method, iterations=8
+        tolerance=jnp.full(3, 1e-10), sensitivity=_member(method), iterations=8
     )
     targets = jnp.array([[1.0, -0.5, 0.3], [0.2, 0.2, 0.2], [-1.0, 0.7, 1.5]])
-    solve = lambda q_t: targeter.solve(_toy_map, q_t, jnp.zeros(3), _toy_with_jacobian)
+    problem = FunctionProblem(_toy_map, _toy_with_jacobian)
+    solve = lambda q_t: targeter.solve(problem, q_t, jnp.zeros(3))
     batch = jax.jit(jax.vmap(solve))(targets)
     assert bool(jnp.all(batch.converged))
     np.testing.assert_allclose(jax.vmap(_toy_map)(batch.p), targets, atol=1e-10)
@@ -65,13 +106,13 @@ def test_newton_least_squares_and_minimum_norm_solutions():
     k = jnp.array([[1.0, 2.0], [0.5, -1.0], [2.0, 0.3]])
     q_t = jnp.array([1.0, 2.0, -0.5])  # inconsistent: no exact solution (n > m)
     result = NewtonTargeter(tolerance=jnp.full(3, 1e-9), iterations=3).solve(
-        lambda p: k @ p, q_t, jnp.zeros(2)
+        FunctionProblem(lambda p: k @ p), q_t, jnp.zeros(2)
     )
     np.testing.assert_allclose(result.p, np.linalg.lstsq(k, q_t, rcond=None)[0], rtol=1e-12)
     assert not bool(result.converged)  # residual left: flagged, not hidden
     kt = k.T  # n < m: the smallest correction meeting the target
     result = NewtonTargeter(tolerance=jnp.full(2, 1e-9), iterations=3).solve(
-        lambda p: kt @ p, q_t[:2], jnp.zeros(3)
+        FunctionProblem(lambda p: kt @ p), q_t[:2], jnp.zeros(3)
     )
     np.testing.assert_allclose(result.p, np.linalg.pinv(kt) @ q_t[:2], rtol=1e-12)
     assert bool(result.converged)
@@ -86,7 +127,7 @@ def transfer():
 
 @functools.partial(jax.jit, static_argnames="method")
 def _sensitivity(sim, x, method, epsilon=1e-3):
-    return midcourse.sensitivity(sim, method, sim.t_first_fix_s, x, epsilon)
+    return midcourse.sensitivity(sim, _member(method, epsilon), sim.t_first_fix_s, x)
 
 
 def _row_relative(k, k_ref):

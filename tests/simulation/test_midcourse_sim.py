@@ -3,12 +3,16 @@ findings, batching, failure accounting, bad input and the CLI report."""
 
 import json
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import gnc_jax as gj
 from gnc_jax import cli, montecarlo
+from gnc_jax.guidance.targeting import AbstractMidcourseGuidance, AutonomousCorrection
 from gnc_jax.scenario import ScenarioError
+from gnc_jax.simulation import midcourse
 
 METHODS = {
     "autodiff": "phoenix-midcourse",
@@ -63,6 +67,34 @@ def test_vmapped_study_equals_per_run_loop():
     assert again.compile_s == 0.0
     rms = lambda x: np.sqrt(np.mean(x**2))
     assert rms(again.outcomes["b0_err_m"]) < 0.7 * rms(study.outcomes["b0_err_m"])
+
+
+def test_the_simulator_executes_the_law_step():
+    """The recorded command at the fix is the law's own `step` on the navigated state, and the
+    Δv baseline its targeted Δv from the true state: the simulator adds only the errors, the
+    propagation and the bookkeeping."""
+    scenario = gj.load_scenario(
+        "phoenix-midcourse", overrides=["navigation.velocity_sigma_mps=0.05"]
+    )
+    sim, law = midcourse.build(scenario)
+    assert isinstance(law, AbstractMidcourseGuidance) and type(law) is AutonomousCorrection
+    assert sim.reference_dv  # navigation error on: the baseline is solved apart
+    one, trace = gj.simulate_one(scenario, index=2, seed=0, record=True)
+    key = gj.run_key(0, 2)
+    ctx = sim.guidance_context
+    x0 = midcourse.initial_state(sim, key)[0]
+    nav = midcourse.navigated_state(sim, key, 0, x0)
+    assert float(jnp.abs(nav - x0)[3:].max()) > 1e-3  # the law sees the navigated state
+    step = jax.jit(lambda x: law.step(law.init(x, ctx), x, sim.t_first_fix_s, ctx)[0])
+    command, reference = step(nav), step(x0)
+    # Different programs round differently; Newton amplifies it (as in the per-run test).
+    np.testing.assert_allclose(trace.predicted_dq[0], command.predicted_dq, rtol=1e-9)
+    np.testing.assert_allclose(trace.dv_command_mps[0], command.dv_mps, rtol=0, atol=1e-8)
+    assert bool(trace.corrected[0]) == bool(command.burn) is True
+    assert int(trace.iterations[0]) == int(command.iterations) == int(one.iterations)
+    dv_ref = np.linalg.norm(np.asarray(reference.dv_targeted_mps))
+    np.testing.assert_allclose(one.dv_ref_mps, dv_ref, rtol=0, atol=1e-8)
+    assert abs(one.dv_ref_mps - one.dv_mps) > 1e-4  # the baseline is not the flown correction
 
 
 def test_non_converged_runs_are_counted_and_left_out():
