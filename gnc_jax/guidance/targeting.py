@@ -230,12 +230,6 @@ class NewtonTargeter(eqx.Module):
     sensitivity: AbstractSensitivity = eqx.field(default_factory=AutodiffSensitivity)
     iterations: int = eqx.field(static=True, default=4)
 
-    @property
-    def epsilon(self) -> Scalar:
-        """The central-difference step of the method, or the default step (1e-3 m/s) of a
-        method without one. Only for ``gnc_jax.report``'s Fig. 2 label and sweep."""
-        return getattr(self.sensitivity, "epsilon", CentralDifferenceSensitivity().epsilon)
-
     def solve(
         self,
         problem: AbstractTargetingProblem,

@@ -29,6 +29,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._numerics import safe_norm
+from .._random import stream_normal
 from .._status import Status
 from .._types import Array, Float, PRNGKeyArray, Scalar, State6, Vector3
 from ..dynamics.ephemeris import (
@@ -188,10 +190,6 @@ class FixRecord(NamedTuple):
 _INITIAL_POSITION, _INITIAL_VELOCITY, _NAVIGATION, _EXECUTION = range(4)
 
 
-def _normal(key, stream, shape=(3,)):
-    return jax.random.normal(jax.random.fold_in(key, stream), shape)
-
-
 def terminal_parameters(sim: MidcourseSimulation, t_s, state) -> Float[Array, "3"]:
     """(B_R, B_T, t_arrival - t_encounter) of a heliocentric state near the encounter
     (`MidcourseGuidanceContext.terminal_parameters`)."""
@@ -208,17 +206,10 @@ def sensitivity(sim: MidcourseSimulation, method: AbstractSensitivity, t_s, stat
     return method.q_and_jacobian(sim.guidance_context.problem(t_s, state), jnp.zeros(3))
 
 
-def _safe_norm(x):
-    """|x| with a zero (not NaN) derivative at x = 0."""
-    n2 = x @ x
-    ok = n2 > 0.0
-    return jnp.where(ok, jnp.sqrt(jnp.where(ok, n2, 1.0)), 0.0)
-
-
 def execute_burn(dv: Vector3, errors: MidcourseErrors, noise: Float[Array, "3"]) -> Vector3:
     """Executed Δv: magnitude (1 + bias + σ n0), direction tilted by σ_p (n1, n2) about two axes
     normal to the commanded direction. A zero command executes as zero (finite derivatives)."""
-    magnitude = _safe_norm(dv)
+    magnitude = safe_norm(dv)
     burn = magnitude > 0.0
     u = jnp.where(burn, dv / jnp.where(burn, magnitude, 1.0), jnp.array([1.0, 0.0, 0.0]))
     helper = jnp.where(jnp.abs(u[2]) < 0.9, jnp.array([0.0, 0.0, 1.0]), jnp.array([1.0, 0.0, 0.0]))
@@ -240,8 +231,8 @@ def initial_state(sim: MidcourseSimulation, key: PRNGKeyArray):
     """``(x0, dr, dv)``: the dispersed true state at the first fix and its position and velocity
     errors (offset + 1-sigma draw per axis)."""
     err = sim.errors
-    dr = err.position_offset_m + err.position_m * _normal(key, _INITIAL_POSITION)
-    dv = err.velocity_offset_mps + err.velocity_mps * _normal(key, _INITIAL_VELOCITY)
+    dr = err.position_offset_m + err.position_m * stream_normal(key, _INITIAL_POSITION)
+    dv = err.velocity_offset_mps + err.velocity_mps * stream_normal(key, _INITIAL_VELOCITY)
     return jnp.concatenate([sim.r0_m + dr, sim.v0_mps + dv]), dr, dv
 
 
@@ -289,7 +280,7 @@ def _fix(
     command, law_state = law.step(cycle.law_state, nav, t, ctx)
     k_exec = jax.random.fold_in(jax.random.fold_in(key, _EXECUTION), i)
     dv_exec = execute_burn(command.dv_mps, sim.errors, jax.random.normal(k_exec, (3,)))
-    dv_norm = _safe_norm(dv_exec)
+    dv_norm = safe_norm(dv_exec)
     is_first = command.burn & (cycle.corrections == 0)
     x = cycle.x.at[3:].add(dv_exec)
     # Coast to the next fix (the last fix's state is the one propagated to encounter).
@@ -348,7 +339,7 @@ def _fly_corrected(
     if sim.reference_dv:
         # The error-free correction: the law's targeted Δv from the true initial state.
         command, _ = law.step(law.init(x0, ctx), x0, t0, ctx)
-        dv_ref = _safe_norm(command.dv_targeted_mps)
+        dv_ref = safe_norm(command.dv_targeted_mps)
     else:
         dv_ref = cycle.first_dv
     return _Flight(cycle, q1, status1, dv_ref, dv_per_fix, b_pred, rec)
@@ -512,7 +503,7 @@ def design_nominal(sim: MidcourseSimulation, t_launch_s: float) -> NominalTransf
     return nominal
 
 
-def reference_normal(plane: str, t_encounter_s: float) -> Vector3:
+def referencestream_normal(plane: str, t_encounter_s: float) -> Vector3:
     """Normal of the B-plane reference plane in EME2000 (SPEC §1)."""
     if plane == "ecliptic":
         return jnp.asarray(ECLIPTIC_POLE_EQUATORIAL)
@@ -601,7 +592,7 @@ def _simulation(cfg: dict) -> MidcourseSimulation:
         t_encounter_s=f(t["encounter_epoch"]),
         t_max_s=f(t_max),
         aim=aim,
-        ref_normal=reference_normal(mi["reference_plane"], t["encounter_epoch"]),
+        ref_normal=referencestream_normal(mi["reference_plane"], t["encounter_epoch"]),
         goal=f([goal["b_km"] * 1e3, goal["tof_s"]]),
         errors=_errors(cfg),
         n_fixes=int(nv["fixes"]),
