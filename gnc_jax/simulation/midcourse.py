@@ -503,7 +503,7 @@ def design_nominal(sim: MidcourseSimulation, t_launch_s: float) -> NominalTransf
     return nominal
 
 
-def referencestream_normal(plane: str, t_encounter_s: float) -> Vector3:
+def reference_normal(plane: str, t_encounter_s: float) -> Vector3:
     """Normal of the B-plane reference plane in EME2000 (SPEC §1)."""
     if plane == "ecliptic":
         return jnp.asarray(ECLIPTIC_POLE_EQUATORIAL)
@@ -592,7 +592,7 @@ def _simulation(cfg: dict) -> MidcourseSimulation:
         t_encounter_s=f(t["encounter_epoch"]),
         t_max_s=f(t_max),
         aim=aim,
-        ref_normal=referencestream_normal(mi["reference_plane"], t["encounter_epoch"]),
+        ref_normal=reference_normal(mi["reference_plane"], t["encounter_epoch"]),
         goal=f([goal["b_km"] * 1e3, goal["tof_s"]]),
         errors=_errors(cfg),
         n_fixes=int(nv["fixes"]),
