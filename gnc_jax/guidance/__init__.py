@@ -7,6 +7,7 @@ the registrations of the built-in laws.
 from .apn import APNState, AugmentedPNGuidance, PNGuidanceContext, PNNavigation
 from .base import AbstractImpactorGuidance, EngineCommand, ImpactorGuidanceContext
 from .los import LOSGuidanceState, LOSSwitchingCurveGuidance, switching_curve
+from .pn import ProportionalNavigationGuidance as ProportionalNavigationGuidance
 from .predictive import PredictiveGuidance, PredictiveGuidanceState
 from .skip_entry import SkipEntryGuidance, SkipEntryState
 from .targeting import AutonomousCorrection, NewtonTargeter, TargetingResult, solve_linear_targeting
