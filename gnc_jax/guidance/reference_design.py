@@ -279,15 +279,26 @@ def second_entry_range(
     return ground_range_m(switch.r, t_switch, chute.r, t_chute, earth)
 
 
-def tabulate_reference(
-    problem: NominalProblem, d: DesignResult, n_grid: int = 256
-) -> ReferenceTrajectory:
-    """Fly the designed nominal and store the second-entry reference against speed."""
+class _SecondEntryRecord(NamedTuple):
+    """The designed second entry flown at 1 s steps, down to the chute altitude (numpy)."""
+
+    r: np.ndarray
+    t: np.ndarray
+    speed: np.ndarray
+    hdot: np.ndarray
+    alt: np.ndarray
+    bank: np.ndarray
+    ngx: np.ndarray
+    v: np.ndarray
+    range_to_go: np.ndarray  # ground range to the chute point, m (first n points)
+    n: int  # points above the chute altitude
+
+
+def _record_second_entry(problem: NominalProblem, d: DesignResult, fl) -> _SecondEntryRecord:
+    """Fly the designed second entry from the switch point and record it step by step."""
     m, earth = problem.model, problem.model.earth
-    fl = fly_nominal(problem, d.sigma_1, d.sigma_a, d.sigma_b, d.v_switch)
     switch, t_sw = fl.switch, fl.t_switch
 
-    # Record the second entry step by step.
     def body(c, _):
         y, t = c
         fv = flight_variables(y, earth)
@@ -320,23 +331,19 @@ def tabulate_reference(
             for i in range(n)
         ]
     )
-    # range rate: central difference of the range to go along the record
-    sdot = np.gradient(rng, t[:n])
-    # keep the part where speed decreases monotonically (the table's abscissa)
-    keep = np.concatenate([[True], np.diff(speed[:n]) < 0])
-    last = int(np.argmin(keep)) if not keep.all() else n
-    grid = np.linspace(speed[0], speed[last - 1], n_grid)
-    order = np.argsort(speed[:last])
+    return _SecondEntryRecord(r, t, speed, hdot, alt, bank, ngx, v, rng, n)
 
-    def table(x):
-        return jnp.asarray(np.interp(grid, speed[:last][order], x[:last][order]))
+
+def _tracking_sensitivities(problem: NominalProblem, d: DesignResult, rec, node_idx, chute_t):
+    """(dR/dN_gx, dR/dḢ, dR/dcos sigma, time to go) at the table nodes ``node_idx``."""
+    m, earth = problem.model, problem.model.earth
+    r, v, t, alt, ngx = rec.r, rec.v, rec.t, rec.alt, rec.ngx
+    speed, hdot = rec.speed, rec.hdot
 
     # Range sensitivities along the reference (the gains of the tracking law): at table nodes,
     # d(range)/d(altitude), d(range)/d(flight-path angle) at fixed speed, and d(range)/d(cos
     # sigma) for a uniform change of cos(sigma) from that point on, all by forward-mode autodiff
     # through the remaining second entry.
-    node_idx = np.linspace(0, last - 1, 48).astype(int)
-
     def range_from(i_state, dh, dfpa, dcos):
         y = EntryState(jnp.asarray(r)[i_state], jnp.asarray(v)[i_state])
         y = perturb_switch_state(y, earth, 0.0, dfpa, dh)
@@ -357,6 +364,34 @@ def tabulate_reference(
     f_hdot = sens[:, 1] / (speed[node_idx] * cosg)  # m per m/s of Ḣ
     f_cos = sens[:, 2]  # m per unit of cos(sigma)
     t_go = chute_t - t[node_idx]
+
+    return f_drag, f_hdot, f_cos, t_go
+
+
+def tabulate_reference(
+    problem: NominalProblem, d: DesignResult, n_grid: int = 256
+) -> ReferenceTrajectory:
+    """Fly the designed nominal and store the second-entry reference against speed."""
+    earth = problem.model.earth
+    fl = fly_nominal(problem, d.sigma_1, d.sigma_a, d.sigma_b, d.v_switch)
+    switch, t_sw = fl.switch, fl.t_switch
+    rec = _record_second_entry(problem, d, fl)
+    n, speed, t, rng = rec.n, rec.speed, rec.t, rec.range_to_go
+    chute_t = float(fl.t_chute)
+    # range rate: central difference of the range to go along the record
+    sdot = np.gradient(rng, t[:n])
+    # keep the part where speed decreases monotonically (the table's abscissa)
+    keep = np.concatenate([[True], np.diff(speed[:n]) < 0])
+    last = int(np.argmin(keep)) if not keep.all() else n
+    grid = np.linspace(speed[0], speed[last - 1], n_grid)
+    order = np.argsort(speed[:last])
+
+    def table(x):
+        return jnp.asarray(np.interp(grid, speed[:last][order], x[:last][order]))
+
+    node_idx = np.linspace(0, last - 1, 48).astype(int)
+    f_drag, f_hdot, f_cos, t_go = _tracking_sensitivities(problem, d, rec, node_idx, chute_t)
+    bank, hdot, ngx = rec.bank, rec.hdot, rec.ngx
 
     def node_table(x):
         o = np.argsort(speed[node_idx])
