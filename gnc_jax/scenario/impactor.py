@@ -297,19 +297,6 @@ def check(cfg: dict) -> None:
             f"camera.window_px: {cam['window_px']}; allowed: an odd number <= camera.roi_px - 4 "
             f"= {cam['roi_px'] - 4}"
         )
-    if cfg["navigation"]["measurement"] == "image":
-        # the largest binning must fit the target's disc into the sub-pixel window at cut-off
-        rho_cut_m = math.hypot(*v) * 1e3 * g["cutoff_tgo_s"]
-        ifov = cam["pixel_pitch_um"] * 1e-6 / cam["focal_length_m"]
-        radius_px = max(cfg["target"]["semi_axes_km"]) * 1e3 / max(rho_cut_m, 1e-9) / ifov
-        need = (radius_px + 3.0 * cam["psf_sigma_px"]) / 2.0 ** cam["max_bin_log2"]
-        if need > 0.5 * (cam["window_px"] - 1) - 1.0:
-            raise ScenarioError(
-                f"camera.max_bin_log2: {cam['max_bin_log2']}; the target ({radius_px:.0f} px "
-                f"radius at the cut-off) does not fit camera.window_px = {cam['window_px']} even "
-                "at the largest binning; allowed: a larger max_bin_log2 or window_px, or a "
-                "longer guidance.cutoff_tgo_s"
-            )
     sun = cfg["dynamics"]["sun_direction"]
     if math.hypot(*sun) == 0.0:
         raise ScenarioError(

@@ -7,6 +7,7 @@ Truth, camera, EKF, guidance and engine are in :mod:`gnc_jax.simulation.impactor
 summary statistics and the report figures.
 """
 
+import dataclasses
 import pathlib
 from typing import Any, ClassVar
 
@@ -20,6 +21,7 @@ from ..guidance.base import AbstractImpactorGuidance
 from ..montecarlo import simulate_one
 from ..navigation.camera import camera_attitude, los_angles
 from ..navigation.centroid import extract_centroid
+from ..navigation.measurements import AbstractMeasurement, measurement_class
 from ..navigation.render import choose_binning, phase_offset_tangent, render_frame, tangent_to_roi
 from ..plotting import ellipse_xy, pyplot, saver
 from ..scenario import impactor as impactor_scenario
@@ -233,8 +235,18 @@ class ImpactorSystem(AbstractSystem):
         "guidance.predictive.burn_times_s": [150.0, 450.0, 660.0],
     }
 
+    def schema(self):
+        """The sections, with ``navigation.measurement`` choosing among the registered front
+        ends (``navigation/measurements``)."""
+        out = super().schema()
+        field = out["navigation"]["measurement"]
+        names = tuple(AbstractMeasurement.measurements)
+        out["navigation"]["measurement"] = dataclasses.replace(field, choices=names)
+        return out
+
     def check(self, config):
         impactor_scenario.check(config)
+        measurement_class(config["navigation"]["measurement"]).check(config)
 
     def build(self, scenario):
         sim = impactor_sim.build(scenario)

@@ -14,6 +14,7 @@ import math
 import jax.numpy as jnp
 
 from ..._types import Array, Float, PRNGKeyArray, Scalar, Vector3
+from ...scenario.schema import ScenarioError
 from ..camera import los_angles, small_rotation
 from ..centroid import extract_centroid
 from ..ekf import MeasurementPrediction, NavEstimate
@@ -60,6 +61,24 @@ class ImageMeasurement(AbstractMeasurement):
         offset = phase_offset_tangent(exposure.c_est, nav.r, tgt.sun_direction, tgt.mean_radius_m)
         z_true = los_angles(exposure.c_true, exposure.los_m)
         return Measurement(z - self.phase_correction * offset, c.valid, z_true)
+
+    @classmethod
+    def check(cls, config: dict) -> None:
+        """The largest binning must fit the target's disc into the sub-pixel window at the
+        guidance cut-off (the closest image)."""
+        cam, g = config["camera"], config["guidance"]
+        v = config["approach"]["velocity_kmps"]
+        rho_cut_m = math.hypot(*v) * 1e3 * g["cutoff_tgo_s"]
+        ifov = cam["pixel_pitch_um"] * 1e-6 / cam["focal_length_m"]
+        radius_px = max(config["target"]["semi_axes_km"]) * 1e3 / max(rho_cut_m, 1e-9) / ifov
+        need = (radius_px + 3.0 * cam["psf_sigma_px"]) / 2.0 ** cam["max_bin_log2"]
+        if need > 0.5 * (cam["window_px"] - 1) - 1.0:
+            raise ScenarioError(
+                f"camera.max_bin_log2: {cam['max_bin_log2']}; the target ({radius_px:.0f} px "
+                f"radius at the cut-off) does not fit camera.window_px = {cam['window_px']} even "
+                "at the largest binning; allowed: a larger max_bin_log2 or window_px, or a "
+                "longer guidance.cutoff_tgo_s"
+            )
 
     @classmethod
     def from_config(cls, config: dict) -> "ImageMeasurement":
