@@ -206,6 +206,24 @@ def _centroid_frames_figure(scenario, trace, out: pathlib.Path) -> pathlib.Path:
     return path
 
 
+IMPACT_LABELS = {
+    "miss_rms_m": "miss RMS (m)",
+    "miss_max_m": "miss max (m)",
+    "miss_mean_m": "miss mean (m)",
+    "dv_mean_mps": "Δv mean (m/s)",
+    "dv_max_mps": "Δv max (m/s)",
+    "firings_max": "firings max",
+    "firings_mode": "firings mode",
+    "firings_mean": "firings (mean)",
+}
+"""How the published miss, Δv and firing metrics of an impact read (impactor and intercept)."""
+
+
+def impact_objective(outcomes):
+    """Miss (softened at 1 m) plus 10 s x Δv, averaged over the runs: differentiable."""
+    return jnp.mean(jnp.sqrt(outcomes.miss_m**2 + 1.0)) + 10.0 * jnp.mean(outcomes.dv_mps)
+
+
 @register_system
 class ImpactorSystem(AbstractSystem):
     name = "impactor"
@@ -216,14 +234,7 @@ class ImpactorSystem(AbstractSystem):
     tunable = ("guidance.los.k1", "guidance.los.k2")
     metrics = ("miss_rms_m", "miss_max_m", "dv_mean_mps", "dv_max_mps", "firings_mean")
     paper_labels: ClassVar[dict[str, str]] = {
-        "miss_rms_m": "miss RMS (m)",
-        "miss_max_m": "miss max (m)",
-        "miss_mean_m": "miss mean (m)",
-        "dv_mean_mps": "Δv mean (m/s)",
-        "dv_max_mps": "Δv max (m/s)",
-        "firings_max": "firings max",
-        "firings_mode": "firings mode",
-        "firings_mean": "firings (mean)",
+        **IMPACT_LABELS,
         "los_error_rms_urad_mean": "LOS meas. error RMS (µrad)",
     }
     example = "deep-impact-los"
@@ -256,8 +267,7 @@ class ImpactorSystem(AbstractSystem):
         return impactor_sim.simulate(params, law, key, record=record)
 
     def smooth_objective(self, outcomes):
-        """Miss (softened at 1 m) plus 10 s x Δv, averaged over the runs."""
-        return jnp.mean(jnp.sqrt(outcomes.miss_m**2 + 1.0)) + 10.0 * jnp.mean(outcomes.dv_mps)
+        return impact_objective(outcomes)
 
     def statistics(self, outcomes, ok):
         return _impactor_statistics(outcomes, ok)

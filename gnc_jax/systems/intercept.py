@@ -9,7 +9,6 @@ Truth, camera, EKF, law and pulses are in :mod:`gnc_jax.simulation.pn`; the laws
 import pathlib
 from typing import Any, ClassVar
 
-import jax.numpy as jnp
 import numpy as np
 
 from .._status import Status
@@ -19,7 +18,7 @@ from ..plotting import ellipse_xy, pyplot, saver
 from ..scenario import pn as intercept_scenario
 from ..simulation import pn as intercept_sim
 from .base import AbstractSystem, register_system
-from .impactor import impact_statistics
+from .impactor import IMPACT_LABELS, impact_objective, impact_statistics
 
 
 def _intercept_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
@@ -164,16 +163,7 @@ class InterceptSystem(AbstractSystem):
         "guidance.apn.trigger_off",
     )
     metrics = ("miss_rms_m", "miss_max_m", "dv_mean_mps", "firings_mean")
-    paper_labels: ClassVar[dict[str, str]] = {
-        "miss_rms_m": "miss RMS (m)",
-        "miss_max_m": "miss max (m)",
-        "miss_mean_m": "miss mean (m)",
-        "dv_mean_mps": "Δv mean (m/s)",
-        "dv_max_mps": "Δv max (m/s)",
-        "firings_max": "firings max",
-        "firings_mode": "firings mode",
-        "firings_mean": "firings (mean)",
-    }
+    paper_labels = IMPACT_LABELS
     example = "bennu-apn"
     # a 2000 s approach, 10 km off, with proportionally smaller knowledge errors
     test_overrides: ClassVar[dict[str, Any]] = {
@@ -193,8 +183,7 @@ class InterceptSystem(AbstractSystem):
         return intercept_sim.simulate(params, law, key, record=record)
 
     def smooth_objective(self, outcomes):
-        """Miss (softened at 1 m) plus 10 s x Δv, averaged over the runs."""
-        return jnp.mean(jnp.sqrt(outcomes.miss_m**2 + 1.0)) + 10.0 * jnp.mean(outcomes.dv_mps)
+        return impact_objective(outcomes)
 
     def statistics(self, outcomes, ok):
         return _intercept_statistics(outcomes, ok)
