@@ -52,7 +52,7 @@ def main():
     for method in args.methods:
         scenario = gj.load_scenario(SCENARIOS[method])
         t0 = time.perf_counter()
-        sim, law = midcourse.build(scenario)
+        sim, law = gj.build(scenario)
         build_s = time.perf_counter() - t0
 
         def solve(x, sim=sim, law=law):

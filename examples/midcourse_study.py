@@ -20,7 +20,7 @@ for name in ("phoenix-midcourse", "phoenix-midcourse-cd", "phoenix-midcourse-stm
     scenario = gj.load_scenario(name)
     s = gj.run_study(scenario, runs=100, seed=0).summary()
     print(
-        f"{scenario['guidance.sensitivity']:>18}: |ΔB| max {s['b_err_km_max']:.3f} km, "
+        f"{scenario['guidance.autonomous.sensitivity']:>18}: |ΔB| max {s['b_err_km_max']:.3f} km, "
         f"|Δt| max {s['tof_err_s_max']:.3f} s, goal met {s['goal_met']}/100, "
         f"Δv mean {s['dv_mean_mps']:.3f} m/s ({s['wall_s']:.2f} s after compilation)"
     )

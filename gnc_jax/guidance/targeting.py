@@ -55,6 +55,8 @@ from ..dynamics.heliocentric import (
     relative_state,
 )
 from ..geometry.hyperbola import b_plane_hyperbolic
+from ..params import from_config, param
+from ..scenario.schema import ScenarioError
 from .base import AbstractGuidanceLaw, register_law
 
 QFunction = Callable[[Float[Array, " m"]], Float[Array, " n"]]
@@ -357,14 +359,95 @@ class AutonomousCorrection(AbstractMidcourseGuidance):
     done; beyond an upper threshold the error is outside the autonomous system's authority and
     is flagged for the ground (no burn); in between the targeter's Δv is executed.
 
-    Attributes:
-        targeter: the Newton targeter.
-        lower: (|ΔB| in m, |Δt| in s) lower thresholds; upper: the upper ones.
+    Its scenario table ``[guidance.autonomous]`` holds the targeter's settings (sensitivity
+    method and its step, Newton iterations and tolerances) and the two thresholds; the
+    targeter and the threshold pairs are assembled from those leaves (``targeter``, ``lower``,
+    ``upper``).
     """
 
-    targeter: NewtonTargeter
-    lower: Float[Array, "2"]
-    upper: Float[Array, "2"]
+    sensitivity: str = param(
+        "autodiff",
+        choices=SENSITIVITIES,
+        doc="sensitivity matrix K: forward-mode autodiff, central difference (eq. 20) or "
+        "variational state-transition matrix (eqs. 21-26)",
+    )
+    epsilon_mps: Scalar = param(
+        1e-3,
+        lo=0.0,
+        lo_open=True,
+        hi=1e3,
+        units="m/s",
+        doc="central-difference step (stable region measured: 3e-5 to 5e-4 m/s for all "
+        "partials to 1e-6; 1e-4 to 1 for the B partials)",
+    )
+    iterations: int = param(5, lo=1, hi=50, doc="Newton iterations (fixed count, masked)")
+    tolerance_b_m: Scalar = param(
+        0.1,
+        toml="tolerance_b_km",
+        scale=1e3,
+        lo=0.0,
+        lo_open=True,
+        hi=1e6,
+        units="km",
+        doc="Newton tolerance on B",
+    )
+    tolerance_tof_s: Scalar = param(
+        1.0, lo=0.0, lo_open=True, hi=1e6, units="s", doc="Newton tolerance on the arrival time"
+    )
+    lower_b_m: Scalar = param(
+        10.0,
+        toml="lower_b_km",
+        scale=1e3,
+        lo=0.0,
+        hi=1e7,
+        units="km",
+        doc="lower threshold: no burn while |dB| and (fixed arrival) |dt| are below it",
+    )
+    lower_tof_s: Scalar = param(60.0, lo=0.0, hi=1e8, units="s", doc="lower threshold on dt")
+    upper_b_m: Scalar = param(
+        1e6,
+        toml="upper_b_km",
+        scale=1e3,
+        lo=0.0,
+        lo_open=True,
+        hi=1e9,
+        units="km",
+        doc="upper threshold: beyond it the error is flagged for the ground, no burn",
+    )
+    upper_tof_s: Scalar = param(
+        1e7, lo=0.0, lo_open=True, hi=1e10, units="s", doc="upper threshold on dt"
+    )
+    n_targets: int = eqx.field(static=True, default=3)  # dim Q: 3 fixed, 2 free arrival
+
+    @property
+    def lower(self) -> Float[Array, "2"]:
+        """(|ΔB| in m, |Δt| in s) lower thresholds."""
+        return jnp.stack([self.lower_b_m, self.lower_tof_s])
+
+    @property
+    def upper(self) -> Float[Array, "2"]:
+        """(|ΔB| in m, |Δt| in s) upper thresholds."""
+        return jnp.stack([self.upper_b_m, self.upper_tof_s])
+
+    @property
+    def targeter(self) -> NewtonTargeter:
+        """The Newton targeter of these settings."""
+        tolerance = jnp.stack([self.tolerance_b_m, self.tolerance_b_m, self.tolerance_tof_s])
+        method = SENSITIVITY_METHODS[self.sensitivity]
+        return NewtonTargeter(
+            tolerance=tolerance[: self.n_targets],
+            sensitivity=method.from_config({"epsilon_mps": self.epsilon_mps}),
+            iterations=self.iterations,
+        )
+
+    @classmethod
+    def check(cls, section, config):
+        for lower, upper in (("lower_b_km", "upper_b_km"), ("lower_tof_s", "upper_tof_s")):
+            if section[lower] >= section[upper]:
+                raise ScenarioError(
+                    f"guidance.autonomous.{lower}: {section[lower]:g} >= {upper} = "
+                    f"{section[upper]:g}; allowed: lower < upper"
+                )
 
     def decide(self, dq: Float[Array, " n"]) -> tuple[Array, Array]:
         """``(correct, ground)`` flags for the predicted error ``dq`` = Q - Q_target."""
@@ -398,18 +481,6 @@ class AutonomousCorrection(AbstractMidcourseGuidance):
 
     @classmethod
     def from_config(cls, section: dict, config: dict, ctx: MidcourseGuidanceContext | None = None):
-        """The law of a validated ``[guidance]`` section (SI); ``ctx`` (required) gives the
-        number of targeted parameters."""
-        f = lambda x: jnp.asarray(x, dtype=jnp.float64)
-        b_m = section["tolerance_b_km"] * 1e3
-        tolerance = f([b_m, b_m, section["tolerance_tof_s"]])
-        targeter = NewtonTargeter(
-            tolerance=tolerance[: ctx.aim.shape[0]],
-            sensitivity=sensitivity_from_config(section),
-            iterations=int(section["iterations"]),
-        )
-        return cls(
-            targeter=targeter,
-            lower=f([section["lower_b_km"] * 1e3, section["lower_tof_s"]]),
-            upper=f([section["upper_b_km"] * 1e3, section["upper_tof_s"]]),
-        )
+        """The law of a validated ``[guidance.autonomous]`` table (SI); ``ctx`` (required)
+        gives the number of targeted parameters."""
+        return from_config(cls, section, n_targets=int(ctx.aim.shape[0]))

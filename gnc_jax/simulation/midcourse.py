@@ -601,12 +601,12 @@ def _simulation(cfg: dict) -> MidcourseSimulation:
     )
 
 
-def build(scenario) -> tuple[MidcourseSimulation, AbstractMidcourseGuidance]:
-    """Simulation data and guidance law of a validated midcourse :class:`Scenario` (SI).
+def build(scenario) -> MidcourseSimulation:
+    """Simulation data of a validated midcourse :class:`Scenario` (SI); the law is built by the
+    system from ``[guidance.<law>]`` (``systems.midcourse``).
 
     Designs the nominal transfer (`design_nominal`, cached) before returning; a nominal that
-    cannot be targeted raises :class:`ScenarioError`. The law is the midcourse family's
-    ``"autonomous"`` member (the scenario has one correction rule).
+    cannot be targeted raises :class:`ScenarioError`.
     """
     cfg = scenario.config
     sim = _simulation(cfg)
@@ -619,10 +619,7 @@ def build(scenario) -> tuple[MidcourseSimulation, AbstractMidcourseGuidance]:
         raise ScenarioError(
             f"mission: {error}; allowed: epochs and aim point of a feasible transfer"
         ) from None
-    sim = eqx.tree_at(lambda s: (s.r0_m, s.v0_mps), sim, (nominal.r0_m, nominal.v0_mps))
-    law_class = AbstractMidcourseGuidance.laws["autonomous"]
-    law = law_class.from_config(cfg["guidance"], cfg, sim.guidance_context)
-    return sim, law
+    return eqx.tree_at(lambda s: (s.r0_m, s.v0_mps), sim, (nominal.r0_m, nominal.v0_mps))
 
 
 def _full_targets(sim: MidcourseSimulation) -> MidcourseSimulation:

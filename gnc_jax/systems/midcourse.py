@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._status import Status
+from ..guidance.targeting import AbstractMidcourseGuidance
 from ..plotting import pyplot, saver
 from ..scenario import midcourse as midcourse_scenario
 from ..simulation import midcourse as midcourse_sim
@@ -191,7 +192,9 @@ def midcourse_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathli
     sim, _ = MidcourseSystem().build(scenario)
     save(_partials_vs_epsilon(plt, sim), "partials_vs_epsilon.png")
     # Fig. 2's step: the scenario's central-difference step, whatever method it flies
-    by_time, departure = _partials_vs_time(plt, sim, float(scenario["guidance.epsilon_mps"]))
+    by_time, departure = _partials_vs_time(
+        plt, sim, float(scenario["guidance.autonomous.epsilon_mps"])
+    )
     save(by_time, "partials_vs_time.png")
     save(departure, "sensitivity_departure.png")
     save(_dv_per_fix(plt, summary, runs, ok, scenario, sim), "dv_per_fix.png")
@@ -203,6 +206,8 @@ class MidcourseSystem(AbstractSystem):
     name = "midcourse"
     description = "interplanetary midcourse correction by autonomous B-plane targeting"
     sections = midcourse_scenario.SCHEMA
+    law_family = AbstractMidcourseGuidance
+    default_law = "autonomous"
     metrics = ("b_err_km_rms", "tof_err_s_rms", "dv_mean_mps", "goal_met_pct")
     paper_labels: ClassVar[dict[str, str]] = {
         "b_err_km_rms": "|ΔB| RMS (km)",
@@ -228,7 +233,8 @@ class MidcourseSystem(AbstractSystem):
         midcourse_scenario.check(config)
 
     def build(self, scenario):
-        return midcourse_sim.build(scenario)
+        sim = midcourse_sim.build(scenario)
+        return sim, self.build_law(scenario.config, sim.guidance_context)
 
     def simulate(self, params, law, key, record=False):
         return midcourse_sim.simulate(params, law, key, record=record)

@@ -121,7 +121,7 @@ def test_newton_least_squares_and_minimum_norm_solutions():
 @pytest.fixture(scope="module")
 def transfer():
     """The packaged default scenario's simulation and the nominal state at the first fix."""
-    sim, law = midcourse.build(gj.load_scenario("phoenix-midcourse"))
+    sim, law = gj.build(gj.load_scenario("phoenix-midcourse"))
     return sim, jnp.concatenate([sim.r0_m, sim.v0_mps])
 
 

@@ -29,7 +29,7 @@ def test_single_correction_meets_the_goal_with_each_sensitivity(method, paper_sc
     10 km and |Δt| < 60 s in >= 99 runs (CI: 6 runs, all)."""
     runs = 100 if paper_scale else CI_RUNS
     scenario = gj.load_scenario(METHODS[method])
-    assert scenario["guidance.sensitivity"] == method
+    assert scenario["guidance.autonomous.sensitivity"] == method
     study = gj.run_study(scenario, runs=runs, seed=0, progress=False)
     s = study.summary()
     assert s["failed"] == 0
@@ -62,7 +62,9 @@ def test_vmapped_study_equals_per_run_loop():
         dv_trace = np.linalg.norm(trace.dv_executed_mps, axis=1)
         np.testing.assert_allclose(dv_trace, one.dv_per_fix_mps)
     # Errors and thresholds are arguments of the executable, not constants: no recompilation.
-    changed = scenario.with_overrides({"dispersion.velocity_mps": 0.3, "guidance.lower_b_km": 5.0})
+    changed = scenario.with_overrides(
+        {"dispersion.velocity_mps": 0.3, "guidance.autonomous.lower_b_km": 5.0}
+    )
     again = gj.run_study(changed, runs=CI_RUNS, seed=0, progress=False)
     assert again.compile_s == 0.0
     rms = lambda x: np.sqrt(np.mean(x**2))
@@ -76,7 +78,7 @@ def test_the_simulator_executes_the_law_step():
     scenario = gj.load_scenario(
         "phoenix-midcourse", overrides=["navigation.velocity_sigma_mps=0.05"]
     )
-    sim, law = midcourse.build(scenario)
+    sim, law = gj.build(scenario)
     assert isinstance(law, AbstractMidcourseGuidance) and type(law) is AutonomousCorrection
     assert sim.reference_dv  # navigation error on: the baseline is solved apart
     one, trace = gj.simulate_one(scenario, index=2, seed=0, record=True)
@@ -99,7 +101,7 @@ def test_the_simulator_executes_the_law_step():
 
 def test_non_converged_runs_are_counted_and_left_out():
     """Two Newton iterations cannot reach 0.1 km from ~10^4 km for every draw."""
-    scenario = gj.load_scenario("phoenix-midcourse", overrides=["guidance.iterations=2"])
+    scenario = gj.load_scenario("phoenix-midcourse", overrides=["guidance.autonomous.iterations=2"])
     study = gj.run_study(scenario, runs=8, seed=0, progress=False)
     status = study.outcomes["status"]
     bad = status == gj.Status.no_convergence
@@ -148,9 +150,18 @@ BAD_INPUT = [
     ({"navigation.fixes": 40}, "navigation.fixes: 40 fixes every 7 days end"),
     ({"navigation.fixes": 0}, "navigation.fixes: 0 is out of range"),
     ({"dispersion.velocity_mps": -0.5}, "dispersion.velocity_mps: -0.5 is out of range"),
-    ({"guidance.sensitivity": "secant"}, "guidance.sensitivity: got 'secant'"),
-    ({"guidance.epsilon_mps": 0.0}, "guidance.epsilon_mps: 0.0 is out of range"),
-    ({"guidance.lower_b_km": 2e6}, "guidance.lower_b_km: 2e+06 >= upper_b_km"),
+    (
+        {"guidance.autonomous.sensitivity": "secant"},
+        "guidance.autonomous.sensitivity: got 'secant'",
+    ),
+    (
+        {"guidance.autonomous.epsilon_mps": 0.0},
+        "guidance.autonomous.epsilon_mps: 0.0 is out of range",
+    ),
+    (
+        {"guidance.autonomous.lower_b_km": 2e6},
+        "guidance.autonomous.lower_b_km: 2e+06 >= upper_b_km",
+    ),
     ({"dynamics.rtol": 1e-20}, "dynamics.rtol: 1e-20 is out of range"),
     ({"execution.magnitude_bias_pct": 80.0}, "execution.magnitude_bias_pct: 80.0 is out"),
 ]
