@@ -173,9 +173,7 @@ def test_bad_input_is_one_clear_line_before_compilation(override, message, capsy
         raise AssertionError("compiled despite bad input")
 
     monkeypatch.setattr(montecarlo, "_compile", no_compile)
-    system = montecarlo.SYSTEMS["midcourse"]
-    blocked = montecarlo.System(no_compile, system.simulate)
-    monkeypatch.setitem(montecarlo.SYSTEMS, "midcourse", blocked)
+    monkeypatch.setattr(type(gj.get_system("midcourse")), "build", no_compile)
     with pytest.raises(ScenarioError) as error:
         gj.load_scenario("phoenix-midcourse", overrides=override)
     assert message in str(error.value) and "allowed" in str(error.value)
