@@ -41,6 +41,7 @@ class ParamSpec:
     derived: bool = False  # SI value depends on other fields: the owner's from_config converts
     convert: Any = None  # file value -> SI value, when not a plain factor
     static: bool = False  # a static field (ints, strings, and floats declared static)
+    section: str = ""  # the scenario section of the field ("": the owner's own table)
 
     def to_si(self, value):
         kind = self.field.kind
@@ -89,6 +90,7 @@ def param(
     si_default=None,
     convert=None,
     static: bool = False,
+    section: str = "",
 ):
     """A Module field declared with its scenario field (see the module docstring).
 
@@ -107,6 +109,8 @@ def param(
         convert: ``file value -> SI value`` when a single factor would not reproduce the
             arithmetic of the unit conversion exactly (e.g. ``x * 1e3 / 1e6``).
         static: keep a float as a static Python float (a step size that shapes a loop).
+        section: the scenario section that holds the field, for a Module whose fields come
+            from several sections (:func:`from_scenario`); "" for a law's own table.
     """
     kind = kind or _kind_of(default)
     if kind == "float":
@@ -118,6 +122,7 @@ def param(
         si_default is not None,
         convert,
         static or kind in ("int", "str"),
+        section,
     )
     meta = {_KEY: spec}
     static = spec.static
@@ -138,9 +143,14 @@ def file_name(attribute: str, spec: ParamSpec) -> str:
     return spec.toml or attribute
 
 
-def schema_of(cls) -> dict[str, Field]:
-    """The scenario fields of ``cls``: ``{file name: Field}`` in declaration order."""
-    return {file_name(a, s): s.field for a, s in declared_params(cls).items()}
+def schema_of(cls, section: str | None = None) -> dict[str, Field]:
+    """The scenario fields of ``cls``: ``{file name: Field}`` in declaration order (only those
+    of ``section`` when given)."""
+    return {
+        file_name(a, s): s.field
+        for a, s in declared_params(cls).items()
+        if section is None or s.section == section
+    }
 
 
 def from_config(cls, section: dict[str, Any], **fixed):
@@ -156,9 +166,28 @@ def from_config(cls, section: dict[str, Any], **fixed):
     return cls(**kwargs, **fixed)
 
 
+def from_scenario(cls, config: dict[str, Any], **fixed):
+    """``cls`` built from a validated scenario configuration, each declared field read from
+    its own ``section`` (:func:`param`); ``fixed`` as in :func:`from_config`."""
+    kwargs = {
+        a: s.to_si(config[s.section][file_name(a, s)])
+        for a, s in declared_params(cls).items()
+        if a not in fixed
+    }
+    return cls(**kwargs, **fixed)
+
+
 def si_value(cls, attribute: str, value):
     """The SI value of ``value`` (file units) of the declared field ``attribute`` of ``cls``."""
     return declared_params(cls)[attribute].to_si(value)
 
 
-__all__ = ["ParamSpec", "param", "declared_params", "schema_of", "from_config", "si_value"]
+__all__ = [
+    "ParamSpec",
+    "param",
+    "declared_params",
+    "schema_of",
+    "from_config",
+    "from_scenario",
+    "si_value",
+]

@@ -134,22 +134,6 @@ SCHEMA = {
         ),
     },
     "navigation": {
-        "knowledge_position_km": F(
-            "floats",
-            [150.0, 8.0, 8.0],
-            length=3,
-            lo=0.0,
-            units="km",
-            doc="1-sigma initial position knowledge along S, T, R",
-        ),
-        "knowledge_velocity_mps": F(
-            "float",
-            0.1,
-            lo=0.0,
-            hi=1e3,
-            units="m/s",
-            doc="1-sigma initial velocity knowledge per axis",
-        ),
         "process_noise_m2s3": F(
             "float",
             1e-18,
@@ -171,46 +155,6 @@ SCHEMA = {
             "bool",
             True,
             doc="image: remove the Lambertian-sphere centre-of-brightness offset (phase angle)",
-        ),
-    },
-    "errors": {
-        "delivery_position_km": F(
-            "float",
-            10.0,
-            lo=0.0,
-            hi=1e4,
-            units="km",
-            doc="1-sigma initial position delivery error, per axis",
-        ),
-        "image_processing_urad": F("float", 10.0, lo=0.0, hi=1e5, units="urad"),
-        "attitude_control_urad": F(
-            "float", 320.0, lo=0.0, hi=1e5, units="urad", doc="camera and thrust pointing error"
-        ),
-        "attitude_bias_urad": F(
-            "float",
-            100.0,
-            lo=0.0,
-            hi=1e5,
-            units="urad",
-            doc="attitude determination bias (constant per run)",
-        ),
-        "attitude_noise_urad": F(
-            "float",
-            30.0,
-            lo=0.0,
-            hi=1e5,
-            units="urad",
-            doc="attitude determination random error (per image)",
-        ),
-        "accel_bias_ug": F("float", 50.0, lo=0.0, hi=1e6, units="ug"),
-        "accel_noise_ug": F("float", 10.0, lo=0.0, hi=1e6, units="ug"),
-        "burn_magnitude_pct": F(
-            "float",
-            2.0,
-            lo=0.0,
-            hi=50.0,
-            units="%",
-            doc="burn execution (thrust magnitude) error, drawn per firing",
         ),
     },
     "guidance": {

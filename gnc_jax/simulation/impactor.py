@@ -49,25 +49,119 @@ from ..navigation.measurements import (
     target_model,
 )
 from ..navigation.render import CameraModel, TargetModel
+from ..params import from_scenario, param
 from ..scenario.impactor import time_of_flight_s
 from .base import flatten_trace, with_status
 
+URAD = 1e-6  # file urad -> rad
+UG = 1e-6 * G0  # file micro-g -> m/s^2
+
 
 class ImpactorErrors(eqx.Module):
-    """1-sigma error sources (seed 000 Table 2). Angles in rad, accelerations in m/s^2."""
+    """1-sigma error sources (seed 000 Table 2), SI: angles in rad, accelerations in m/s^2.
 
-    delivery_position_m: Scalar = 10e3
-    knowledge_position_m: Float[Array, "3"] = eqx.field(
-        default_factory=lambda: jnp.array([150e3, 8e3, 8e3])
-    )  # along the B-plane axes (S, T, R)
-    knowledge_velocity_mps: Scalar = 0.1
-    image_processing_rad: Scalar = 10e-6  # the filter's model; the front end has its own
-    attitude_control_rad: Scalar = 320e-6
-    attitude_bias_rad: Scalar = 100e-6
-    attitude_noise_rad: Scalar = 30e-6
-    accel_bias_mps2: Scalar = 50e-6 * G0
-    accel_noise_mps2: Scalar = 10e-6 * G0
-    burn_magnitude_frac: Scalar = 0.02
+    Each field is declared once, with its scenario field: ``[errors]`` and the knowledge
+    fields of ``[navigation]`` are derived from this class (``systems.impactor``).
+    """
+
+    delivery_position_m: Scalar = param(
+        10.0,
+        toml="delivery_position_km",
+        section="errors",
+        scale=1e3,
+        lo=0.0,
+        hi=1e4,
+        units="km",
+        doc="1-sigma initial position delivery error, per axis",
+    )
+    knowledge_position_m: Float[Array, "3"] = param(
+        [150.0, 8.0, 8.0],
+        toml="knowledge_position_km",
+        section="navigation",
+        scale=1e3,
+        length=3,
+        lo=0.0,
+        units="km",
+        doc="1-sigma initial position knowledge along S, T, R",
+    )
+    knowledge_velocity_mps: Scalar = param(
+        0.1,
+        section="navigation",
+        lo=0.0,
+        hi=1e3,
+        units="m/s",
+        doc="1-sigma initial velocity knowledge per axis",
+    )
+    image_processing_rad: Scalar = param(
+        10.0,
+        toml="image_processing_urad",
+        section="errors",
+        scale=URAD,
+        lo=0.0,
+        hi=1e5,
+        units="urad",
+        doc="centroiding error of the noise front end (and the filter's model of it)",
+    )
+    attitude_control_rad: Scalar = param(
+        320.0,
+        toml="attitude_control_urad",
+        section="errors",
+        scale=URAD,
+        lo=0.0,
+        hi=1e5,
+        units="urad",
+        doc="camera and thrust pointing error",
+    )
+    attitude_bias_rad: Scalar = param(
+        100.0,
+        toml="attitude_bias_urad",
+        section="errors",
+        scale=URAD,
+        lo=0.0,
+        hi=1e5,
+        units="urad",
+        doc="attitude determination bias (constant per run)",
+    )
+    attitude_noise_rad: Scalar = param(
+        30.0,
+        toml="attitude_noise_urad",
+        section="errors",
+        scale=URAD,
+        lo=0.0,
+        hi=1e5,
+        units="urad",
+        doc="attitude determination random error (per image)",
+    )
+    accel_bias_mps2: Scalar = param(
+        50.0,
+        toml="accel_bias_ug",
+        section="errors",
+        scale=UG,
+        lo=0.0,
+        hi=1e6,
+        units="ug",
+        doc="accelerometer bias (constant per run)",
+    )
+    accel_noise_mps2: Scalar = param(
+        10.0,
+        toml="accel_noise_ug",
+        section="errors",
+        scale=UG,
+        lo=0.0,
+        hi=1e6,
+        units="ug",
+        doc="accelerometer white noise",
+    )
+    burn_magnitude_frac: Scalar = param(
+        2.0,
+        toml="burn_magnitude_pct",
+        section="errors",
+        convert=lambda pct: pct / 100.0,
+        lo=0.0,
+        hi=50.0,
+        units="%",
+        doc="burn execution (thrust magnitude) error, drawn per firing",
+    )
 
 
 class ImpactorSimulation(eqx.Module):
@@ -368,24 +462,6 @@ def simulate(
     return with_status(_outcome(sim, carry, draws)), flatten_trace(rec)
 
 
-def errors_from_config(er: dict, nv: dict) -> ImpactorErrors:
-    """The :class:`ImpactorErrors` of validated ``[errors]`` and ``[navigation]`` sections (SI)."""
-    f = lambda x: jnp.asarray(x, dtype=jnp.float64)  # noqa: E731
-    urad, ug = 1e-6, 1e-6 * G0
-    return ImpactorErrors(
-        delivery_position_m=f(er["delivery_position_km"] * 1e3),
-        knowledge_position_m=f(nv["knowledge_position_km"]) * 1e3,
-        knowledge_velocity_mps=f(nv["knowledge_velocity_mps"]),
-        image_processing_rad=f(er["image_processing_urad"] * urad),
-        attitude_control_rad=f(er["attitude_control_urad"] * urad),
-        attitude_bias_rad=f(er["attitude_bias_urad"] * urad),
-        attitude_noise_rad=f(er["attitude_noise_urad"] * urad),
-        accel_bias_mps2=f(er["accel_bias_ug"] * ug),
-        accel_noise_mps2=f(er["accel_noise_ug"] * ug),
-        burn_magnitude_frac=f(er["burn_magnitude_pct"] / 100.0),
-    )
-
-
 def build(scenario) -> ImpactorSimulation:
     """Simulation data of a validated impactor :class:`Scenario` (SI units); the guidance law
     is built by the system from ``[guidance.<law>]`` (``systems.impactor``)."""
@@ -431,7 +507,7 @@ def build(scenario) -> ImpactorSimulation:
         dt_s=float(g["dt_s"]),
         image_interval_s=float(image_dt),
     )
-    errors = errors_from_config(er, nv)
+    errors = from_scenario(ImpactorErrors, cfg)
     sim = ImpactorSimulation(
         r0_m=r0,
         v0_mps=v0,

@@ -145,6 +145,16 @@ class AbstractSystem(abc.ABC):
         return f"<system {self.name!r}>"
 
 
+def sections_with(sections: Schema, *modules: type) -> Schema:
+    """``sections`` plus the fields the parameter Modules ``modules`` declare, each in the
+    section its declaration names (:func:`gnc_jax.params.param` with ``section=``)."""
+    out = {name: dict(fields) for name, fields in sections.items()}
+    for cls in modules:
+        for attribute, spec in declared_params(cls).items():
+            out.setdefault(spec.section, {})[file_name(attribute, spec)] = spec.field
+    return out
+
+
 def register_system(system):
     """Register a system (a subclass of :class:`AbstractSystem`, or an instance) under its
     ``name``; usable as a class decorator. Registering another object under a name that is
@@ -227,4 +237,5 @@ __all__ = [
     "get_system",
     "systems",
     "tunable_leaf",
+    "sections_with",
 ]
