@@ -65,6 +65,12 @@ class AbstractMeasurement(eqx.Module):
     ) -> Measurement: ...
 
     @classmethod
+    def check(cls, config: dict) -> None:
+        """Cross-field checks of a validated scenario that only this front end needs; raise
+        :class:`~gnc_jax.scenario.ScenarioError` with one line. Default: none."""
+        return None
+
+    @classmethod
     @abc.abstractmethod
     def from_config(cls, config: dict) -> "AbstractMeasurement":
         """The front end of a validated impactor scenario (SI units)."""
