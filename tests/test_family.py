@@ -6,6 +6,7 @@ a family is tested here without new test code. Each case runs the system's ``exa
 with its ``test_overrides`` (a cheap version of the same code paths).
 """
 
+import dataclasses
 import json
 import os
 import pathlib
@@ -20,7 +21,7 @@ import pytest
 
 import gnc_jax as gj
 from gnc_jax import montecarlo
-from gnc_jax.params import declared_params, file_name, schema_of
+from gnc_jax.params import declared_params, file_name, from_scenario, schema_of
 from gnc_jax.systems import tunable_leaf
 
 CASES = [
@@ -190,3 +191,22 @@ def test_a_system_registered_outside_the_package_runs_from_the_command_line(tmp_
         "gnc-jax: error: scenario.kind: 'toy-intercept'; allowed: one of capsule, impactor, "
         "intercept, midcourse"
     )
+
+
+@pytest.mark.parametrize("name", list(gj.systems()))
+def test_parameter_modules_declare_every_field_once(name):
+    """Every field of a system's parameter Modules is declared with ``param`` (section, units,
+    range, default in the file's units) — no field keeps a hand-written default of its own —
+    and appears in the system's schema; building the Module from the example scenario reads
+    each field from its declared section."""
+    system = gj.get_system(name)
+    config = example(name).config
+    schema = system.schema()
+    for cls in system.parameter_modules:
+        specs = declared_params(cls)
+        assert set(specs) == {f.name for f in dataclasses.fields(cls)}, cls.__name__
+        built = from_scenario(cls, config)
+        for attribute, spec in specs.items():
+            assert schema[spec.section][file_name(attribute, spec)] == spec.field
+            expected = spec.to_si(config[spec.section][file_name(attribute, spec)])
+            np.testing.assert_array_equal(getattr(built, attribute), expected, err_msg=attribute)

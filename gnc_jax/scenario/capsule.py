@@ -55,20 +55,6 @@ SCHEMA = {
         "max_rate_dps": F("float", 20.0, lo=0.0, lo_open=True, hi=360.0, units="deg/s"),
         "max_accel_dps2": F("float", 10.0, lo=0.0, lo_open=True, hi=3600.0, units="deg/s^2"),
     },
-    "dispersions": {  # 3-sigma, seed 003 Table 2
-        "speed_mps": F("float", 100.0, lo=0.0, hi=2000.0, units="m/s"),
-        "fpa_deg": F("float", 0.2, lo=0.0, hi=5.0, units="deg"),
-        "heading_deg": F("float", 0.5, lo=0.0, hi=10.0, units="deg"),
-        "downrange_km": F("float", 100.0, lo=0.0, hi=2000.0, units="km"),
-        "altitude_km": F("float", 1.0, lo=0.0, hi=50.0, units="km"),
-        "crossrange_km": F("float", 100.0, lo=0.0, hi=2000.0, units="km"),
-        "cl_pct": F("float", 20.0, lo=0.0, hi=90.0, units="%"),
-        "cd_pct": F("float", 20.0, lo=0.0, hi=90.0, units="%"),
-        "density_pct": F("float", 30.0, lo=0.0, hi=90.0, units="%"),
-        "mass_pct": F(
-            "float", 5.0, lo=0.0, hi=50.0, units="%", doc="uniform half-width (not 3-sigma)"
-        ),
-    },
     "guidance": {
         "hold_bank_deg": F("float", 60.0, lo=0.0, hi=180.0, units="deg"),
         "pc_period_s": F(

@@ -89,32 +89,6 @@ SCHEMA = {
             doc="search for the closest approach up to this long after the nominal encounter",
         ),
     },
-    "dispersion": {
-        "position_km": F(
-            "float", 289.0, lo=0.0, hi=1e6, units="km", doc="1-sigma initial position, per axis"
-        ),
-        "velocity_mps": F(
-            "float", 0.577, lo=0.0, hi=1e3, units="m/s", doc="1-sigma initial velocity, per axis"
-        ),
-        "position_offset_km": F(
-            "floats",
-            [0.0, 0.0, 0.0],
-            length=3,
-            lo=-1e6,
-            hi=1e6,
-            units="km",
-            doc="deterministic initial position error (the paper's cycle cases: 500 km in x)",
-        ),
-        "velocity_offset_mps": F(
-            "floats",
-            [0.0, 0.0, 0.0],
-            length=3,
-            lo=-1e3,
-            hi=1e3,
-            units="m/s",
-            doc="deterministic initial velocity error (the paper's cycle cases: 1 m/s in x)",
-        ),
-    },
     "navigation": {
         "fixes": F(
             "int",
@@ -125,53 +99,6 @@ SCHEMA = {
         ),
         "interval_days": F(
             "float", 7.0, lo=0.0, lo_open=True, hi=1000.0, units="days", doc="fix interval"
-        ),
-        "position_sigma_km": F(
-            "float", 0.0, lo=0.0, hi=1e6, units="km", doc="1-sigma random position error per fix"
-        ),
-        "velocity_sigma_mps": F(
-            "float", 0.0, lo=0.0, hi=1e3, units="m/s", doc="1-sigma random velocity error per fix"
-        ),
-        "position_bias_km": F(
-            "floats",
-            [0.0, 0.0, 0.0],
-            length=3,
-            lo=-1e6,
-            hi=1e6,
-            units="km",
-            doc="constant position error of every fix",
-        ),
-        "velocity_bias_mps": F(
-            "floats",
-            [0.0, 0.0, 0.0],
-            length=3,
-            lo=-1e3,
-            hi=1e3,
-            units="m/s",
-            doc="constant velocity error of every fix (the paper: 0.3 m/s in x)",
-        ),
-        "final_fix_scale": F(
-            "float",
-            1.0,
-            lo=0.0,
-            hi=1e3,
-            doc="the last fix's error is scaled by this (the paper's 0.01 m/s final fix: 1/30)",
-        ),
-    },
-    "execution": {
-        "magnitude_bias_pct": F(
-            "float",
-            0.0,
-            lo=-50.0,
-            hi=50.0,
-            units="%",
-            doc="systematic burn magnitude error (the paper: 3 % and 5 %)",
-        ),
-        "magnitude_sigma_pct": F(
-            "float", 0.0, lo=0.0, hi=50.0, units="%", doc="1-sigma random magnitude error"
-        ),
-        "pointing_sigma_deg": F(
-            "float", 0.0, lo=0.0, hi=30.0, units="deg", doc="1-sigma pointing error per axis"
         ),
     },
     "guidance": {

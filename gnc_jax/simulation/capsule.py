@@ -59,23 +59,129 @@ from ..guidance.entry_common import (
     hermite_state,
 )
 from ..integrate import rk4_step
+from ..params import from_scenario, param
 from ..root_finding import RootStatus
 from .base import with_status
 
+THIRD = 1.0 / 3.0  # the scenario gives 3-sigma values
+
+
+def _sigma_deg(x):
+    return math.radians(x) * THIRD
+
+
+def _sigma_km(x):
+    return x * 1e3 * THIRD
+
+
+def _sigma_pct(x):
+    return x / 100 * THIRD
+
 
 class CapsuleDispersions(eqx.Module):
-    """1-sigma dispersions (seed 003 Table 2 gives 3-sigma values; mass is uniform ±)."""
+    """1-sigma dispersions, SI; the ``[dispersions]`` section gives 3-sigma values (seed 003
+    Table 2; the mass is uniform within ± its half width) and is derived from this class."""
 
-    speed_mps: Scalar = 100.0 / 3
-    fpa_rad: Scalar = 0.2 / 3 * jnp.pi / 180
-    heading_rad: Scalar = 0.5 / 3 * jnp.pi / 180
-    downrange_m: Scalar = 100e3 / 3
-    altitude_m: Scalar = 1e3 / 3
-    crossrange_m: Scalar = 100e3 / 3
-    lift_frac: Scalar = 0.2 / 3
-    drag_frac: Scalar = 0.2 / 3
-    density_frac: Scalar = 0.3 / 3
-    mass_frac_half_width: Scalar = 0.05
+    speed_mps: Scalar = param(
+        100.0,
+        toml="speed_mps",
+        section="dispersions",
+        scale=THIRD,
+        lo=0.0,
+        hi=2000.0,
+        units="m/s",
+        doc="3-sigma entry speed",
+    )
+    fpa_rad: Scalar = param(
+        0.2,
+        toml="fpa_deg",
+        section="dispersions",
+        convert=_sigma_deg,
+        lo=0.0,
+        hi=5.0,
+        units="deg",
+        doc="3-sigma entry flight-path angle",
+    )
+    heading_rad: Scalar = param(
+        0.5,
+        toml="heading_deg",
+        section="dispersions",
+        convert=_sigma_deg,
+        lo=0.0,
+        hi=10.0,
+        units="deg",
+        doc="3-sigma entry heading",
+    )
+    downrange_m: Scalar = param(
+        100.0,
+        toml="downrange_km",
+        section="dispersions",
+        convert=_sigma_km,
+        lo=0.0,
+        hi=2000.0,
+        units="km",
+        doc="3-sigma entry point along track",
+    )
+    altitude_m: Scalar = param(
+        1.0,
+        toml="altitude_km",
+        section="dispersions",
+        convert=_sigma_km,
+        lo=0.0,
+        hi=50.0,
+        units="km",
+        doc="3-sigma entry altitude",
+    )
+    crossrange_m: Scalar = param(
+        100.0,
+        toml="crossrange_km",
+        section="dispersions",
+        convert=_sigma_km,
+        lo=0.0,
+        hi=2000.0,
+        units="km",
+        doc="3-sigma entry point across track",
+    )
+    lift_frac: Scalar = param(
+        20.0,
+        toml="cl_pct",
+        section="dispersions",
+        convert=_sigma_pct,
+        lo=0.0,
+        hi=90.0,
+        units="%",
+        doc="3-sigma lift coefficient",
+    )
+    drag_frac: Scalar = param(
+        20.0,
+        toml="cd_pct",
+        section="dispersions",
+        convert=_sigma_pct,
+        lo=0.0,
+        hi=90.0,
+        units="%",
+        doc="3-sigma drag coefficient",
+    )
+    density_frac: Scalar = param(
+        30.0,
+        toml="density_pct",
+        section="dispersions",
+        convert=_sigma_pct,
+        lo=0.0,
+        hi=90.0,
+        units="%",
+        doc="3-sigma atmospheric density",
+    )
+    mass_frac_half_width: Scalar = param(
+        5.0,
+        toml="mass_pct",
+        section="dispersions",
+        convert=lambda x: x / 100,
+        lo=0.0,
+        hi=50.0,
+        units="%",
+        doc="uniform half-width (not 3-sigma)",
+    )
 
 
 class CapsuleSimulation(eqx.Module):
@@ -406,24 +512,6 @@ def _target(cfg: dict, earth, entry) -> Vector3:
     )
 
 
-def _dispersions(dsp: dict) -> CapsuleDispersions:
-    """1-sigma dispersions from the scenario's 3-sigma values (mass: uniform half width)."""
-    f, rad = _f64, math.radians
-    three = 1.0 / 3.0
-    return CapsuleDispersions(
-        speed_mps=f(dsp["speed_mps"] * three),
-        fpa_rad=f(rad(dsp["fpa_deg"]) * three),
-        heading_rad=f(rad(dsp["heading_deg"]) * three),
-        downrange_m=f(dsp["downrange_km"] * 1e3 * three),
-        altitude_m=f(dsp["altitude_km"] * 1e3 * three),
-        crossrange_m=f(dsp["crossrange_km"] * 1e3 * three),
-        lift_frac=f(dsp["cl_pct"] / 100 * three),
-        drag_frac=f(dsp["cd_pct"] / 100 * three),
-        density_frac=f(dsp["density_pct"] / 100 * three),
-        mass_frac_half_width=f(dsp["mass_pct"] / 100),
-    )
-
-
 def build(scenario) -> CapsuleSimulation:
     """Simulation data of a validated capsule scenario (SI units); the law (with the reference
     it designs for this vehicle, entry and target) is built by the system from
@@ -441,7 +529,7 @@ def build(scenario) -> CapsuleSimulation:
         actuator=BankActuator(
             max_rate=rad(act["max_rate_dps"]), max_acceleration=rad(act["max_accel_dps2"])
         ),
-        dispersions=_dispersions(cfg["dispersions"]),
+        dispersions=from_scenario(CapsuleDispersions, cfg),
         target_fixed=target,
         ratio_filter_gain=_f64(g["ratio_filter_gain"]),
         hold_bank_rad=_f64(rad(g["hold_bank_deg"])),

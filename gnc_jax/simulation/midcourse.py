@@ -60,38 +60,137 @@ from ..guidance.targeting import (
     jacobian_autodiff,
     jacobian_central_difference,
 )
+from ..params import from_scenario, param
 from ..scenario import ScenarioError
 from ..scenario.midcourse import epochs_s
 from .base import with_status
 
 
+def _pct(x):
+    return x / 100.0
+
+
 class MidcourseErrors(eqx.Module):
     """Error sources (SI, EME2000 axes). Initial errors are drawn once per run; navigation and
-    execution errors at every fix.
-
-    Attributes:
-        position_m, velocity_mps: 1-sigma initial dispersion per axis (paper: 289 km, 0.577 m/s).
-        position_offset_m, velocity_offset_mps: deterministic initial error (paper's cycle
-            cases: 500 km and 1 m/s along x).
-        nav_position_m, nav_velocity_mps: 1-sigma random navigation error per axis and fix.
-        nav_position_bias_m, nav_velocity_bias_mps: constant navigation error (paper: 0.3 m/s x).
-        final_fix_scale: factor on the last fix's navigation error (paper: 0.01 / 0.3).
-        magnitude_bias, magnitude_sigma: burn magnitude error, systematic and 1-sigma (fraction).
-        pointing_sigma_rad: 1-sigma burn pointing error about each axis normal to the burn.
+    execution errors at every fix. Each field is declared once with its scenario field
+    (``[dispersion]``, ``[navigation]``, ``[execution]``), from which those sections derive.
     """
 
-    position_m: Scalar = 289e3
-    velocity_mps: Scalar = 0.577
-    position_offset_m: Vector3 = eqx.field(default_factory=lambda: jnp.zeros(3))
-    velocity_offset_mps: Vector3 = eqx.field(default_factory=lambda: jnp.zeros(3))
-    nav_position_m: Scalar = 0.0
-    nav_velocity_mps: Scalar = 0.0
-    nav_position_bias_m: Vector3 = eqx.field(default_factory=lambda: jnp.zeros(3))
-    nav_velocity_bias_mps: Vector3 = eqx.field(default_factory=lambda: jnp.zeros(3))
-    final_fix_scale: Scalar = 1.0
-    magnitude_bias: Scalar = 0.0
-    magnitude_sigma: Scalar = 0.0
-    pointing_sigma_rad: Scalar = 0.0
+    position_m: Scalar = param(
+        289.0,
+        toml="position_km",
+        section="dispersion",
+        scale=1e3,
+        lo=0.0,
+        hi=1e6,
+        units="km",
+        doc="1-sigma initial position, per axis",
+    )
+    velocity_mps: Scalar = param(
+        0.577,
+        section="dispersion",
+        lo=0.0,
+        hi=1e3,
+        units="m/s",
+        doc="1-sigma initial velocity, per axis",
+    )
+    position_offset_m: Vector3 = param(
+        [0.0, 0.0, 0.0],
+        toml="position_offset_km",
+        section="dispersion",
+        scale=1e3,
+        length=3,
+        lo=-1e6,
+        hi=1e6,
+        units="km",
+        doc="deterministic initial position error (the paper's cycle cases: 500 km in x)",
+    )
+    velocity_offset_mps: Vector3 = param(
+        [0.0, 0.0, 0.0],
+        section="dispersion",
+        length=3,
+        lo=-1e3,
+        hi=1e3,
+        units="m/s",
+        doc="deterministic initial velocity error (the paper's cycle cases: 1 m/s in x)",
+    )
+    nav_position_m: Scalar = param(
+        0.0,
+        toml="position_sigma_km",
+        section="navigation",
+        scale=1e3,
+        lo=0.0,
+        hi=1e6,
+        units="km",
+        doc="1-sigma random position error per fix",
+    )
+    nav_velocity_mps: Scalar = param(
+        0.0,
+        toml="velocity_sigma_mps",
+        section="navigation",
+        lo=0.0,
+        hi=1e3,
+        units="m/s",
+        doc="1-sigma random velocity error per fix",
+    )
+    nav_position_bias_m: Vector3 = param(
+        [0.0, 0.0, 0.0],
+        toml="position_bias_km",
+        section="navigation",
+        scale=1e3,
+        length=3,
+        lo=-1e6,
+        hi=1e6,
+        units="km",
+        doc="constant position error of every fix",
+    )
+    nav_velocity_bias_mps: Vector3 = param(
+        [0.0, 0.0, 0.0],
+        toml="velocity_bias_mps",
+        section="navigation",
+        length=3,
+        lo=-1e3,
+        hi=1e3,
+        units="m/s",
+        doc="constant velocity error of every fix (the paper: 0.3 m/s in x)",
+    )
+    final_fix_scale: Scalar = param(
+        1.0,
+        section="navigation",
+        lo=0.0,
+        hi=1e3,
+        doc="the last fix's error is scaled by this (the paper's 0.01 m/s final fix: 1/30)",
+    )
+    magnitude_bias: Scalar = param(
+        0.0,
+        toml="magnitude_bias_pct",
+        section="execution",
+        convert=_pct,
+        lo=-50.0,
+        hi=50.0,
+        units="%",
+        doc="systematic burn magnitude error (the paper: 3 % and 5 %)",
+    )
+    magnitude_sigma: Scalar = param(
+        0.0,
+        toml="magnitude_sigma_pct",
+        section="execution",
+        convert=_pct,
+        lo=0.0,
+        hi=50.0,
+        units="%",
+        doc="1-sigma random magnitude error",
+    )
+    pointing_sigma_rad: Scalar = param(
+        0.0,
+        toml="pointing_sigma_deg",
+        section="execution",
+        convert=math.radians,
+        lo=0.0,
+        hi=30.0,
+        units="deg",
+        doc="1-sigma pointing error per axis",
+    )
 
 
 class MidcourseSimulation(eqx.Module):
@@ -534,26 +633,6 @@ def _model(cfg: dict, t: dict[str, float], t_max_s: float) -> HeliocentricModel:
     )
 
 
-def _errors(cfg: dict) -> MidcourseErrors:
-    """The error sources of a validated configuration (SI)."""
-    di, nv, ex = cfg["dispersion"], cfg["navigation"], cfg["execution"]
-    f = lambda x: jnp.asarray(x, dtype=jnp.float64)  # noqa: E731
-    return MidcourseErrors(
-        position_m=f(di["position_km"] * 1e3),
-        velocity_mps=f(di["velocity_mps"]),
-        position_offset_m=f(di["position_offset_km"]) * 1e3,
-        velocity_offset_mps=f(di["velocity_offset_mps"]),
-        nav_position_m=f(nv["position_sigma_km"] * 1e3),
-        nav_velocity_mps=f(nv["velocity_sigma_mps"]),
-        nav_position_bias_m=f(nv["position_bias_km"]) * 1e3,
-        nav_velocity_bias_mps=f(nv["velocity_bias_mps"]),
-        final_fix_scale=f(nv["final_fix_scale"]),
-        magnitude_bias=f(ex["magnitude_bias_pct"] / 100.0),
-        magnitude_sigma=f(ex["magnitude_sigma_pct"] / 100.0),
-        pointing_sigma_rad=f(math.radians(ex["pointing_sigma_deg"])),
-    )
-
-
 def _has_errors(cfg: dict) -> bool:
     """Whether navigation or execution errors are on (then the Δv baseline is solved apart)."""
     nv, ex = cfg["navigation"], cfg["execution"]
@@ -594,7 +673,7 @@ def _simulation(cfg: dict) -> MidcourseSimulation:
         aim=aim,
         ref_normal=reference_normal(mi["reference_plane"], t["encounter_epoch"]),
         goal=f([goal["b_km"] * 1e3, goal["tof_s"]]),
-        errors=_errors(cfg),
+        errors=from_scenario(MidcourseErrors, cfg),
         n_fixes=int(nv["fixes"]),
         guidance_enabled=bool(g["enabled"]),
         reference_dv=bool(g["enabled"] and _has_errors(cfg)),

@@ -40,7 +40,10 @@ class AbstractSystem(abc.ABC):
     Class attributes:
         name: the scenario ``kind`` that selects this system.
         description: one line for ``gnc-jax list --fields`` and the docs.
-        sections: the schema of the scenario sections (without the law tables).
+        sections: the schema of the scenario sections that no parameter Module declares.
+        parameter_modules: Modules whose fields are declared with
+            :func:`gnc_jax.params.param` (section, units, range, default): their fields are
+            added to the schema (:func:`sections_with`).
         law_family: the guidance-law family base (``None`` when the system has no choice of
             law); its registered laws are the allowed values of ``guidance.law``.
         default_law: the law used when a scenario does not name one.
@@ -55,6 +58,7 @@ class AbstractSystem(abc.ABC):
     name: ClassVar[str]
     description: ClassVar[str] = ""
     sections: ClassVar[Schema] = {}
+    parameter_modules: ClassVar[tuple[type, ...]] = ()
     law_family: ClassVar[type | None] = None
     default_law: ClassVar[str] = ""
     tunable: ClassVar[tuple[str, ...]] = ()
@@ -76,7 +80,7 @@ class AbstractSystem(abc.ABC):
 
     def schema(self) -> Schema:
         """Every section, with ``guidance.law`` and one ``[guidance.<law>]`` table per law."""
-        out = {k: dict(v) for k, v in self.sections.items()}
+        out = sections_with(self.sections, *self.parameter_modules)
         laws = self.laws()
         if laws:
             out.setdefault("guidance", {})

@@ -209,6 +209,7 @@ class CapsuleSystem(AbstractSystem):
     name = "capsule"
     description = "lunar-return skip entry: predictor-corrector and reference tracking"
     sections = capsule_scenario.SCHEMA
+    parameter_modules = (capsule_sim.CapsuleDispersions,)
     law_family = AbstractEntryGuidance
     default_law = "skip_entry"
     tunable = (

@@ -26,7 +26,7 @@ from ..navigation.render import choose_binning, phase_offset_tangent, render_fra
 from ..plotting import ellipse_xy, pyplot, saver
 from ..scenario import impactor as impactor_scenario
 from ..simulation import impactor as impactor_sim
-from .base import AbstractSystem, register_system, sections_with
+from .base import AbstractSystem, register_system
 
 
 def impact_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
@@ -228,7 +228,8 @@ def impact_objective(outcomes):
 class ImpactorSystem(AbstractSystem):
     name = "impactor"
     description = "small-body impactor terminal guidance: optical navigation, EKF, engine"
-    sections = sections_with(impactor_scenario.SCHEMA, impactor_sim.ImpactorErrors)
+    sections = impactor_scenario.SCHEMA
+    parameter_modules = (impactor_sim.ImpactorErrors,)
     law_family = AbstractImpactorGuidance
     default_law = "los"
     tunable = ("guidance.los.k1", "guidance.los.k2")

@@ -206,6 +206,7 @@ class MidcourseSystem(AbstractSystem):
     name = "midcourse"
     description = "interplanetary midcourse correction by autonomous B-plane targeting"
     sections = midcourse_scenario.SCHEMA
+    parameter_modules = (midcourse_sim.MidcourseErrors,)
     law_family = AbstractMidcourseGuidance
     default_law = "autonomous"
     metrics = ("b_err_km_rms", "tof_err_s_rms", "dv_mean_mps", "goal_met_pct")
