@@ -42,6 +42,7 @@ class ParamSpec:
     convert: Any = None  # file value -> SI value, when not a plain factor
     static: bool = False  # a static field (ints, strings, and floats declared static)
     section: str = ""  # the scenario section of the field ("": the owner's own table)
+    tunable: bool = False  # a gain users tune (``gnc-jax tune``, the family gradient tests)
 
     def to_si(self, value):
         kind = self.field.kind
@@ -91,6 +92,7 @@ def param(
     convert=None,
     static: bool = False,
     section: str = "",
+    tunable: bool = False,
 ):
     """A Module field declared with its scenario field (see the module docstring).
 
@@ -111,6 +113,8 @@ def param(
         static: keep a float as a static Python float (a step size that shapes a loop).
         section: the scenario section that holds the field, for a Module whose fields come
             from several sections (:func:`from_scenario`); "" for a law's own table.
+        tunable: a gain users tune: a differentiable leaf the system lists among its tunable
+            leaves (``AbstractSystem.tunable_names``).
     """
     kind = kind or _kind_of(default)
     if kind == "float":
@@ -123,6 +127,7 @@ def param(
         convert,
         static or kind in ("int", "str"),
         section,
+        tunable,
     )
     meta = {_KEY: spec}
     static = spec.static

@@ -29,7 +29,7 @@ BAD_INPUT = [
     ),
     (["run", "deep-impact-los", "--set", "guidance.k1=3"], "it moved to [guidance.los]"),
     (["run", "deep-impact-los", "--set", "guidance.los.kk=3"], "guidance.los.kk: unknown field"),
-    (["run", "deep-impact-los", "--set", "guidance.law=pn"], "guidance.law: got 'pn'"),
+    (["run", "deep-impact-los", "--set", "guidance.law=pid"], "guidance.law: got 'pid'"),
     (["run", "deep-impact-los", "--set", "spacecraft.mass_kg=-372"], "spacecraft.mass_kg: -372"),
     (["run", "deep-impact-los", "--set", "spacecraft.thrust_n=0"], "spacecraft.thrust_n: 0"),
     (["run", "deep-impact-los", "--set", "guidance.los.k2=5"], "guidance.los.k2: 5 > k1 = 4"),

@@ -64,7 +64,7 @@ class AbstractToyGuidance(AbstractGuidanceLaw):
 class ToyPN(AbstractToyGuidance):
     """a = N V_c lambda_dot (perpendicular to the line of sight)."""
 
-    n: jax.Array = param(3.0, lo=0.5, hi=10.0, doc="navigation constant")
+    n: jax.Array = param(3.0, lo=0.5, hi=10.0, doc="navigation constant", tunable=True)
 
     def init(self, nav, ctx):
         return jnp.zeros(())
@@ -82,7 +82,7 @@ class ToyPN(AbstractToyGuidance):
 class ToyZEM(AbstractToyGuidance):
     """a = k ZEM / t_go^2 with t_go = -|r|^2 / (r . v)."""
 
-    k: jax.Array = param(3.0, lo=0.1, hi=20.0, doc="zero-effort-miss gain")
+    k: jax.Array = param(3.0, lo=0.1, hi=20.0, doc="zero-effort-miss gain", tunable=True)
 
     def init(self, nav, ctx):
         return jnp.zeros(())
@@ -116,7 +116,6 @@ class ToySystem(AbstractSystem):
     }
     law_family = AbstractToyGuidance
     default_law = "pn"
-    tunable = ("guidance.pn.n", "guidance.zem.k")
     metrics = ("miss_rms_m", "dv_mean_mps")
     paper_labels: ClassVar[dict[str, str]] = {"miss_rms_m": "miss RMS (m)"}
     example = str(pathlib.Path(__file__).with_name("toy.toml"))

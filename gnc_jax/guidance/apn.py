@@ -119,8 +119,10 @@ class AugmentedPNGuidance(AbstractInterceptGuidance):
     default engine.
     """
 
-    n0: Scalar = param(8.0, lo=0.0, lo_open=True, hi=100.0, doc="N0 of eq. 12")
-    k: Scalar = param(2.0, lo=0.0, hi=10.0, doc="exponent k of eq. 12; 0 = constant N = n0")
+    n0: Scalar = param(8.0, lo=0.0, lo_open=True, hi=100.0, doc="N0 of eq. 12", tunable=True)
+    k: Scalar = param(
+        2.0, lo=0.0, hi=10.0, doc="exponent k of eq. 12; 0 = constant N = n0", tunable=True
+    )
     a_on_mps2: Scalar = param(
         1.0,
         toml="trigger_on",
@@ -130,6 +132,7 @@ class AugmentedPNGuidance(AbstractInterceptGuidance):
         si_default=4e-5,
         doc="Schmitt on-threshold a_on in units of a_ref = n_min x (minimum impulse bit) / "
         "coast_s, the command change one pulse causes at the start of the coast",
+        tunable=True,
     )
     a_off_mps2: Scalar = param(
         0.5,
@@ -139,6 +142,7 @@ class AugmentedPNGuidance(AbstractInterceptGuidance):
         hi=1e6,
         si_default=2e-5,
         doc="Schmitt off-threshold a_off in units of a_ref; trigger_off < trigger_on",
+        tunable=True,
     )
     n_min: Scalar = param(2.0, lo=0.0, hi=100.0, doc="lower bound of N (eq. 12: 2)")
     temperature: Scalar = param(

@@ -58,10 +58,20 @@ class LOSSwitchingCurveGuidance(AbstractImpactorGuidance):
     """
 
     k1: Scalar = param(
-        4.0, lo=0.0, lo_open=True, hi=100.0, doc="miss tolerance rho_max = k1 sqrt(E^2+F^2)"
+        4.0,
+        lo=0.0,
+        lo_open=True,
+        hi=100.0,
+        doc="miss tolerance rho_max = k1 sqrt(E^2+F^2)",
+        tunable=True,
     )
     k2: Scalar = param(
-        1.0, lo=0.0, lo_open=True, hi=100.0, doc="shut-off rho_min = k2 sqrt(E^2+F^2); k2 <= k1"
+        1.0,
+        lo=0.0,
+        lo_open=True,
+        hi=100.0,
+        doc="shut-off rho_min = k2 sqrt(E^2+F^2); k2 <= k1",
+        tunable=True,
     )
     temperature: Scalar = param(
         0.05, lo=0.0, lo_open=True, hi=10.0, doc="temperature of the relaxed switch (gradients)"

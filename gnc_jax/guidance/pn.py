@@ -41,7 +41,7 @@ class ProportionalNavigationGuidance(AbstractImpactorGuidance):
     docstring).
     ``n``, ``a_on_mps2``, ``a_off_mps2`` are differentiable leaves."""
 
-    n: Scalar = param(3.0, lo=1.0, hi=20.0, doc="navigation constant N")
+    n: Scalar = param(3.0, lo=1.0, hi=20.0, doc="navigation constant N", tunable=True)
     a_on_mps2: Scalar = param(
         0.2,
         toml="trigger_on_mmps2",
@@ -51,6 +51,7 @@ class ProportionalNavigationGuidance(AbstractImpactorGuidance):
         hi=1e4,
         units="mm/s^2",
         doc="the engine fires when |a_cmd| reaches it",
+        tunable=True,
     )
     a_off_mps2: Scalar = param(
         0.1,
@@ -61,6 +62,7 @@ class ProportionalNavigationGuidance(AbstractImpactorGuidance):
         hi=1e4,
         units="mm/s^2",
         doc="the engine stops when |a_cmd| falls to it; < trigger_on_mmps2",
+        tunable=True,
     )
     temperature: Scalar = param(
         0.05, lo=0.0, lo_open=True, hi=10.0, doc="temperature of the relaxed trigger (gradients)"

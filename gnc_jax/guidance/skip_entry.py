@@ -241,16 +241,32 @@ class SkipEntryGuidance(AbstractEntryGuidance):
     reference: ReferenceTrajectory
     chute_altitude_m: Scalar
     k_drag_load: Scalar = param(
-        1.0, lo=0.0, hi=100.0, doc="eq. 7: weight of the drag-load term of the predicted range"
+        1.0,
+        lo=0.0,
+        hi=100.0,
+        doc="eq. 7: weight of the drag-load term of the predicted range",
+        tunable=True,
     )
     k_hdot: Scalar = param(
-        1.0, lo=0.0, hi=100.0, doc="eq. 7: weight of the Ḣ term of the predicted range"
+        1.0,
+        lo=0.0,
+        hi=100.0,
+        doc="eq. 7: weight of the Ḣ term of the predicted range",
+        tunable=True,
     )
     k_range: Scalar = param(
-        2.5, lo=0.0, hi=100.0, doc="eq. 7: overall gain on the range deviation (1 = dead-beat)"
+        2.5,
+        lo=0.0,
+        hi=100.0,
+        doc="eq. 7: overall gain on the range deviation (1 = dead-beat)",
+        tunable=True,
     )
     k_range_rate: Scalar = param(
-        0.5, lo=0.0, hi=100.0, doc="eq. 7: weight of the range-rate term of the predicted range"
+        0.5,
+        lo=0.0,
+        hi=100.0,
+        doc="eq. 7: weight of the range-rate term of the predicted range",
+        tunable=True,
     )
     ng0_g: Scalar = param(
         0.1, lo=0.0, lo_open=True, hi=5.0, units="g", doc="load that ends the attitude hold"

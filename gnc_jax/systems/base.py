@@ -47,12 +47,15 @@ class AbstractSystem(abc.ABC):
         law_family: the guidance-law family base (``None`` when the system has no choice of
             law); its registered laws are the allowed values of ``guidance.law``.
         default_law: the law used when a scenario does not name one.
-        tunable: scenario names of the differentiable leaves a user may tune, e.g.
-            ``"guidance.los.k1"``.
+        tunable: scenario names of tunable leaves beyond the laws' own (which a law declares
+            with ``param(..., tunable=True)``); all of them: :meth:`tunable_names`.
         metrics: summary keys that objectives and envelope maps may read.
         paper_labels: ``{summary key: label}`` for the paper-vs-gnc_jax tables.
         example: a packaged scenario name (or a TOML path) of this system.
         test_overrides: ``{"section.field": value}`` that make ``example`` cheap for tests.
+        batch_tolerance: ``(rtol, atol)`` to which a vmapped batch reproduces the per-run
+            program on float outcomes (integer outcomes must be equal): both compute the same
+            run, but XLA compiles the two programs separately and may round differently.
     """
 
     name: ClassVar[str]
@@ -65,12 +68,23 @@ class AbstractSystem(abc.ABC):
     metrics: ClassVar[tuple[str, ...]] = ()
     paper_labels: ClassVar[dict[str, str]] = {}
     example: ClassVar[str] = ""
+    batch_tolerance: ClassVar[tuple[float, float]] = (1e-9, 1e-9)
     test_overrides: ClassVar[dict[str, Any]] = {}
 
     # ---- scenario ----
     def laws(self) -> dict[str, type]:
         """``{name: law class}`` of the registered laws of this system's family."""
         return dict(self.law_family.laws) if self.law_family is not None else {}
+
+    def tunable_names(self) -> tuple[str, ...]:
+        """Scenario names of the tunable leaves: ``tunable`` plus every law parameter declared
+        ``tunable=True`` (``guidance.<law>.<field>``), so a new law brings its own."""
+        names = list(self.tunable)
+        for law, cls in self.laws().items():
+            for attribute, spec in declared_params(cls).items():
+                if spec.tunable:
+                    names.append(f"guidance.{law}.{file_name(attribute, spec)}")
+        return tuple(dict.fromkeys(names))
 
     def law_name(self, raw: dict) -> str:
         """The law a (raw or validated) configuration flies."""
@@ -232,7 +246,9 @@ def tunable_leaf(system: AbstractSystem, name: str):
             for attribute, file in law_parameters(cls).items():
                 if file == parts[2]:
                     return "law", attribute
-    raise ScenarioError(f"{name}: not a tunable leaf of {system.name}; allowed: {system.tunable}")
+    raise ScenarioError(
+        f"{name}: not a tunable leaf of {system.name}; allowed: {', '.join(system.tunable_names())}"
+    )
 
 
 __all__ = [

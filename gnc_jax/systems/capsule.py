@@ -212,12 +212,6 @@ class CapsuleSystem(AbstractSystem):
     parameter_modules = (capsule_sim.CapsuleDispersions,)
     law_family = AbstractEntryGuidance
     default_law = "skip_entry"
-    tunable = (
-        "guidance.skip_entry.k_drag_load",
-        "guidance.skip_entry.k_hdot",
-        "guidance.skip_entry.k_range",
-        "guidance.skip_entry.k_range_rate",
-    )
     metrics = ("downrange_err_km", "crossrange_err_km", "load_peak_g_max", "predictions_mean")
     paper_labels: ClassVar[dict[str, str]] = {
         "downrange_err_km_3sigma": "downrange 3σ (km)",

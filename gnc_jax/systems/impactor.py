@@ -232,7 +232,6 @@ class ImpactorSystem(AbstractSystem):
     parameter_modules = (impactor_sim.ImpactorErrors,)
     law_family = AbstractImpactorGuidance
     default_law = "los"
-    tunable = ("guidance.los.k1", "guidance.los.k2")
     metrics = ("miss_rms_m", "miss_max_m", "dv_mean_mps", "dv_max_mps", "firings_mean")
     paper_labels: ClassVar[dict[str, str]] = {
         **IMPACT_LABELS,

@@ -156,12 +156,6 @@ class InterceptSystem(AbstractSystem):
     sections = intercept_scenario.SCHEMA
     law_family = AbstractInterceptGuidance
     default_law = "apn"
-    tunable = (
-        "guidance.apn.n0",
-        "guidance.apn.k",
-        "guidance.apn.trigger_on",
-        "guidance.apn.trigger_off",
-    )
     metrics = ("miss_rms_m", "miss_max_m", "dv_mean_mps", "firings_mean")
     paper_labels = IMPACT_LABELS
     example = "bennu-apn"

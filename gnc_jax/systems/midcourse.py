@@ -228,6 +228,9 @@ class MidcourseSystem(AbstractSystem):
         "b0_err_t_km_std": "ΔB_T no guidance 1σ (km)",
     }
     example = "phoenix-midcourse"
+    # adaptive step control and Newton iterations amplify the batched program's rounding to
+    # millimetres on a miss of tens of metres (tests/simulation/test_midcourse_sim.py)
+    batch_tolerance = (1e-9, 0.05)
     test_overrides: ClassVar[dict[str, Any]] = {}
 
     def check(self, config):
