@@ -40,9 +40,8 @@ def example(name, law=None):
 
 
 def tunables(name, law):
-    return [
-        t for t in gj.get_system(name).tunable if law is None or t.startswith(f"guidance.{law}.")
-    ]
+    names = gj.get_system(name).tunable_names()
+    return [t for t in names if law is None or t.startswith(f"guidance.{law}.")]
 
 
 def assert_outcomes_equal(a: dict, b: dict, rows=slice(None), tolerance=(1e-9, 1e-9)):
