@@ -247,3 +247,10 @@ def test_pn_scenarios_load_with_paper_rows(name):
     assert sc.kind == "intercept" and sc.paper
     for key in sc.paper:
         assert key in sc.system.paper_labels, key
+
+
+def test_a_renamed_kind_says_its_new_name(tmp_path):
+    old = tmp_path / "old.toml"
+    old.write_text('[scenario]\nname = "x"\nkind = "pn"\n')
+    with pytest.raises(ScenarioError, match=r"scenario.kind: 'pn' \(renamed 'intercept'\)"):
+        gj.load_scenario(old)

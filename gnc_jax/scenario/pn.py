@@ -103,31 +103,7 @@ SCHEMA = {
             doc="LOS measurement interval; a whole multiple of guidance.dt_s (paper: every "
             "guidance step, Fig. 4)",
         ),
-        "knowledge_position_km": F(
-            "floats",
-            [100.0, 10.0, 10.0],
-            length=3,
-            lo=0.0,
-            hi=1e6,
-            units="km",
-            doc="1-sigma initial position knowledge along the LOS, across it in the orbit "
-            "plane, and out of plane (Table 4: (100, 10); planar runs ignore the third)",
-        ),
-        "knowledge_velocity_mps": F(
-            "float", 0.1, lo=0.0, hi=1e3, units="m/s", doc="1-sigma per axis (Table 4)"
-        ),
         "process_noise_m2s3": F("float", 1e-18, lo=0.0, hi=1.0, units="m^2/s^3"),
-    },
-    "errors": {
-        "attitude_urad": F(
-            "float",
-            320.0,
-            lo=0.0,
-            hi=1e5,
-            units="urad",
-            doc="1-sigma attitude measurement error (Table 4): white on every LOS measurement, "
-            "and the thrust pointing error of each firing",
-        ),
     },
 }
 

@@ -56,15 +56,40 @@ from ..navigation.ekf import (
     propagate_state,
 )
 from ..navigation.measurements import AbstractMeasurement, Exposure, GaussianLOSMeasurement
+from ..params import from_scenario, param
 from .base import flatten_trace, with_status
 
 
 class PNErrors(eqx.Module):
-    """1-sigma error sources (seed 004 Table 4), SI."""
+    """1-sigma error sources (seed 004 Table 4), SI; each field declared once with its
+    scenario field (``[navigation]`` knowledge, ``[errors]``)."""
 
-    knowledge_position_m: Float[Array, "3"]  # along the LOS, across in-plane, out of plane
-    knowledge_velocity_mps: Scalar
-    attitude_rad: Scalar
+    knowledge_position_m: Float[Array, "3"] = param(
+        [100.0, 10.0, 10.0],
+        toml="knowledge_position_km",
+        section="navigation",
+        scale=1e3,
+        length=3,
+        lo=0.0,
+        hi=1e6,
+        units="km",
+        doc="1-sigma initial position knowledge along the LOS, across it in the orbit "
+        "plane, and out of plane (Table 4: (100, 10); planar runs ignore the third)",
+    )
+    knowledge_velocity_mps: Scalar = param(
+        0.1, section="navigation", lo=0.0, hi=1e3, units="m/s", doc="1-sigma per axis (Table 4)"
+    )
+    attitude_rad: Scalar = param(
+        320.0,
+        toml="attitude_urad",
+        section="errors",
+        convert=lambda urad: urad * 1e-6,
+        lo=0.0,
+        hi=1e5,
+        units="urad",
+        doc="1-sigma attitude measurement error (Table 4): white on every LOS measurement, "
+        "and the thrust pointing error of each firing",
+    )
 
 
 class PNSimulation(eqx.Module):
@@ -369,11 +394,7 @@ def build(scenario) -> PNSimulation:
         dt_s=float(g["dt_s"]),
     )
     image_dt = nv["image_interval_s"]
-    errors = PNErrors(
-        knowledge_position_m=f(nv["knowledge_position_km"]) * 1e3,
-        knowledge_velocity_mps=f(nv["knowledge_velocity_mps"]),
-        attitude_rad=f(er["attitude_urad"] * 1e-6),
-    )
+    errors = from_scenario(PNErrors, cfg)
     sim = PNSimulation(
         y0=y0,
         context=context,

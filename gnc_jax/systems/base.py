@@ -32,6 +32,7 @@ from ..params import declared_params, file_name, schema_of
 from ..scenario.schema import Field, ScenarioError, Schema, validate
 
 _REGISTRY: dict[str, "AbstractSystem"] = {}
+_RENAMED = {"pn": "intercept"}  # kinds of earlier versions, named in the error
 
 
 class AbstractSystem(abc.ABC):
@@ -221,7 +222,10 @@ def get_system(name: str) -> AbstractSystem:
     """The registered system of scenario kind ``name``."""
     _load_builtin()
     if name not in _REGISTRY:
-        raise ScenarioError(f"scenario.kind: {name!r}; allowed: one of {', '.join(_REGISTRY)}")
+        renamed = f" (renamed {_RENAMED[name]!r})" if name in _RENAMED else ""
+        raise ScenarioError(
+            f"scenario.kind: {name!r}{renamed}; allowed: one of {', '.join(_REGISTRY)}"
+        )
     return _REGISTRY[name]
 
 

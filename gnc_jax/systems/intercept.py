@@ -154,6 +154,7 @@ class InterceptSystem(AbstractSystem):
     name = "intercept"
     description = "deep-space intercept: augmented PN with Schmitt-triggered pulse firing"
     sections = intercept_scenario.SCHEMA
+    parameter_modules = (intercept_sim.PNErrors,)
     law_family = AbstractInterceptGuidance
     default_law = "apn"
     metrics = ("miss_rms_m", "miss_max_m", "dv_mean_mps", "firings_mean")
