@@ -11,10 +11,13 @@ errors answer at once, without starting JAX, and JAX is configured by ``gnc_jax`
 import argparse
 import sys
 
+EXIT_REFUSED = 2  # bad input, refused before anything was compiled
+EXIT_ALL_FAILED = 3  # the study ran (results written) but every run failed
+
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message):  # one line instead of usage + message
-        self.exit(2, f"gnc-jax: error: {message} (see gnc-jax {self.prog.split()[-1]} --help)\n")
+        self.exit(2, f"gnc-jax: error: {message} (see {self.prog} --help)\n")
 
 
 def _positive_int(name):
@@ -87,11 +90,33 @@ def cmd_list(args) -> int:
     return 0
 
 
+def _writable_dir(path) -> None:
+    """Create ``path`` (and its parents) and check that files can be written in it, before
+    any work is spent; raise :class:`~gnc_jax.scenario.ScenarioError` naming it otherwise."""
+    import pathlib
+    import tempfile
+
+    from .scenario import ScenarioError
+
+    try:
+        out = pathlib.Path(path)
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as e:
+        raise ScenarioError(
+            f"--out {path}: cannot create or write there ({e.strerror or e}); allowed: a "
+            "directory that can be created and written"
+        ) from None
+
+
 def cmd_run(args) -> int:
     from .montecarlo import run_study
     from .scenario import load_scenario
 
     scenario = load_scenario(args.scenario, overrides=args.set or ())
+    if args.out:
+        _writable_dir(args.out)
     study = run_study(
         scenario,
         runs=args.runs,
@@ -110,11 +135,22 @@ def cmd_run(args) -> int:
     if args.out:
         paths = study.save(args.out)
         print("wrote " + ", ".join(paths.values()))
+    if summary["failed"] == summary["runs"]:
+        print(f"gnc-jax: every run failed ({summary['failed_by_status']})", file=sys.stderr)
+        return EXIT_ALL_FAILED
     return 0
 
 
 def cmd_reproduce(args) -> int:
     from .reproduction import reproduce
+    from .scenario import ScenarioError, packaged_names
+
+    unknown = sorted(set(args.only or ()) - set(packaged_names()))
+    if unknown:
+        raise ScenarioError(
+            f"--only {unknown[0]}: unknown scenario; allowed: {', '.join(packaged_names())}"
+        )
+    _writable_dir(args.out)
 
     reproduce(
         args.out, runs=args.runs, only=args.only, progress=False if args.no_progress else None
@@ -193,7 +229,7 @@ def main(argv=None) -> int:
         return args.func(args)
     except (ScenarioError, FileNotFoundError) as e:
         print(f"gnc-jax: error: {e}", file=sys.stderr)
-        return 2
+        return EXIT_REFUSED
 
 
 if __name__ == "__main__":

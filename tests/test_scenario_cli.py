@@ -254,3 +254,50 @@ def test_a_renamed_kind_says_its_new_name(tmp_path):
     old.write_text('[scenario]\nname = "x"\nkind = "pn"\n')
     with pytest.raises(ScenarioError, match=r"scenario.kind: 'pn' \(renamed 'intercept'\)"):
         gj.load_scenario(old)
+
+
+def test_an_unwritable_out_dir_is_refused_before_compilation(capsys, monkeypatch):
+    def no_compile(*a, **k):
+        raise AssertionError("compiled despite an unwritable --out")
+
+    monkeypatch.setattr(montecarlo, "_compile", no_compile)
+    assert cli.main(["run", "deep-impact-los", "--runs", "5", "--out", "/dev/null/study"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert err.startswith("gnc-jax: error: --out /dev/null/study: cannot create or write")
+    assert cli.main(["reproduce", "--out", "/dev/null/r", "--runs", "1"]) == 2
+    assert "--out /dev/null/r" in capsys.readouterr().err
+
+
+def test_reproduce_of_an_unknown_scenario_is_refused(capsys, tmp_path):
+    assert cli.main(["reproduce", "--out", str(tmp_path), "--only", "nosuch"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("gnc-jax: error: --only nosuch: unknown scenario; allowed: ")
+    assert not (tmp_path / "reproduce.md").exists()
+
+
+def test_usage_errors_name_the_command_once(capsys):
+    with pytest.raises(SystemExit) as e:
+        cli.main([])
+    assert e.value.code == 2
+    assert capsys.readouterr().err.strip().endswith("(see gnc-jax --help)")
+    with pytest.raises(SystemExit):
+        cli.main(["run"])
+    assert capsys.readouterr().err.strip().endswith("(see gnc-jax run --help)")
+
+
+def test_a_study_whose_every_run_failed_exits_3(tmp_path, capsys, monkeypatch):
+    system = gj.get_system("toy-intercept")
+
+    class AlwaysNaN(type(system)):
+        def simulate(self, params, law, key, record=False):
+            out, trace = super().simulate(params, law, key, record)
+            return out._replace(miss_m=out.miss_m * float("nan")), trace
+
+    monkeypatch.setattr(montecarlo, "get_system", lambda kind: AlwaysNaN())
+    toy = pathlib.Path(__file__).with_name("toy.toml")
+    out = tmp_path / "toy"
+    assert cli.main(["run", str(toy), "--runs", "4", "--out", str(out), "--no-progress"]) == 3
+    assert "every run failed" in capsys.readouterr().err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["failed"] == 4 and summary["failed_by_status"] == {"nan": 4}
