@@ -14,6 +14,8 @@ class Status(enum.IntEnum):
     skip_out = 2  # capsule: skipped out of the atmosphere
     no_convergence = 3  # an iteration (corrector, targeter) did not converge
     time_out = 4  # the run did not reach its terminal condition in the allotted time
+    out_of_domain = 5  # the state left the model's domain (e.g. a miss larger than the range)
+    propellant = 6  # the engine needed more propellant than the vehicle carries
 
     @classmethod
     def name_of(cls, code: int) -> str:

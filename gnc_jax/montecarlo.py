@@ -9,6 +9,7 @@ Compilation happens once, ahead of time, and is timed separately from the study.
 
 import dataclasses
 import functools
+import os
 import sys
 import time
 from typing import Any
@@ -58,6 +59,88 @@ def batch_function(system: AbstractSystem, n_devices: int | None = None):
         check_vma=False,
     )
     return jax.jit(sharded), len(devices)
+
+
+MAX_HOURS = 24.0
+"""Default bound on a study's estimated wall time; above it :func:`run_study` refuses."""
+MAX_MEMORY_FRACTION = 0.5
+"""Default bound on a chunk's memory, as a fraction of the machine's physical memory."""
+ANNOUNCE_S = 30.0
+"""A study estimated to run longer than this announces its estimate and shows progress."""
+
+
+@dataclasses.dataclass(frozen=True)
+class CostEstimate:
+    """What a study will cost, estimated from the scenario alone (before any compilation).
+
+    Attributes:
+        runs: runs in the study; steps_per_run: simulation steps of one run (the system's
+        :meth:`~gnc_jax.systems.AbstractSystem.steps_per_run`; ``None`` when unknown);
+        n_devices: host devices the runs are split over; seconds: estimated wall time after
+        compilation, from the system's measured ``step_seconds`` (an estimate: within a
+        factor of about 3 on the development machine).
+    """
+
+    runs: int
+    steps_per_run: float | None
+    n_devices: int
+    seconds: float | None
+
+    def __str__(self) -> str:
+        if self.steps_per_run is None:
+            return f"{self.runs} runs (no cost model for this system)"
+        return (
+            f"{self.runs} runs x {self.steps_per_run:.3g} steps = "
+            f"{self.runs * self.steps_per_run:.3g} steps, about {_duration(self.seconds)} on "
+            f"{self.n_devices} device{'s' if self.n_devices > 1 else ''}"
+        )
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.2g} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.2g} min"
+    if seconds < 3 * 86400:
+        return f"{seconds / 3600:.2g} h"
+    return f"{seconds / 86400:.3g} days"
+
+
+def estimate_cost(scenario: Scenario, runs: int | None = None, n_devices: int | None = None):
+    """:class:`CostEstimate` of a study of ``scenario`` (nothing is built or compiled)."""
+    runs = scenario.runs if runs is None else runs
+    n_dev = min(n_devices or len(jax.devices()), len(jax.devices()))
+    system = get_system(scenario.kind)
+    steps = system.steps_per_run(scenario.config)
+    if steps is None:
+        return CostEstimate(runs, None, n_dev, None)
+    per_device = -(-runs // n_dev)
+    return CostEstimate(runs, float(steps), n_dev, per_device * steps * system.step_seconds)
+
+
+def _physical_memory() -> int:
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):  # not POSIX: assume 8 GiB
+        return 8 << 30
+
+
+def _check_memory(compiled, chunk: int, limit_fraction: float) -> None:
+    """Refuse a chunk whose compiled program needs more than ``limit_fraction`` of the
+    machine's memory, before it runs (checked on the compiled executable's own figures)."""
+    try:
+        stats = compiled.memory_analysis()
+        need = stats.temp_size_in_bytes + stats.argument_size_in_bytes + stats.output_size_in_bytes
+    except Exception:  # a backend without memory analysis: nothing to check
+        return
+    limit = limit_fraction * _physical_memory()
+    if need > limit:
+        per_run = need / chunk
+        raise ScenarioError(
+            f"chunk_size: {chunk} runs need {need / 1e9:.3g} GB ({per_run / 1e3:.3g} kB per run),"
+            f" more than {limit_fraction:.0%} of this machine's {_physical_memory() / 1e9:.3g} GB;"
+            f" allowed: chunk_size <= {max(int(limit // per_run), 1)} (CLI --chunk-size)"
+        )
 
 
 _COMPILED: dict = {}
@@ -135,6 +218,8 @@ def run_study(
     chunk_size: int | None = None,
     progress: bool | None = None,
     n_devices: int | None = None,
+    max_hours: float = MAX_HOURS,
+    max_memory_fraction: float = MAX_MEMORY_FRACTION,
 ) -> Study:
     """Run a Monte Carlo study of ``scenario``.
 
@@ -146,6 +231,14 @@ def run_study(
         progress: show a progress bar (default: when stderr is a terminal and there are
             several chunks).
         n_devices: host devices to shard over (default: all).
+        max_hours: refuse (:class:`~gnc_jax.scenario.ScenarioError`, before the reference
+            design or compilation) a study whose :func:`estimate_cost` exceeds this many hours.
+        max_memory_fraction: refuse a chunk whose compiled program needs more than this
+            fraction of the machine's physical memory (checked after compilation, before any
+            run).
+
+    A study estimated to take more than ``ANNOUNCE_S`` seconds prints its estimate to stderr
+    and runs in chunks of about 10 s each so that the progress bar has an ETA.
     """
     runs = scenario.runs if runs is None else runs
     seed = scenario.seed if seed is None else seed
@@ -153,19 +246,48 @@ def run_study(
         raise ScenarioError(f"runs: {runs!r}; allowed: an integer >= 1")
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**32:
         raise ScenarioError(f"seed: {seed!r}; allowed: an integer in [0, 2^32)")
-    if chunk_size is not None and (not isinstance(chunk_size, int) or chunk_size <= 0):
+    if chunk_size is not None and (
+        isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size <= 0
+    ):
         raise ScenarioError(f"chunk_size: {chunk_size!r}; allowed: an integer >= 1")
+    for name, value, hi in (
+        ("max_hours", max_hours, None),
+        ("max_memory_fraction", max_memory_fraction, 1.0),
+    ):
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, (int, float))
+            or not (value > 0 and (hi is None or value <= hi))
+        ):
+            raise ScenarioError(
+                f"{name}: {value!r}; allowed: a number > 0" + (f" and <= {hi:g}" if hi else "")
+            )
     system = get_system(scenario.kind)
+    cost = estimate_cost(scenario, runs, n_devices)
+    if cost.seconds is not None and cost.seconds > max_hours * 3600:
+        raise ScenarioError(
+            f"cost: {cost}; allowed: at most {max_hours:g} h (raise max_hours, CLI --max-hours, "
+            "or use fewer runs or a coarser step)"
+        )
+    announce = cost.seconds is not None and cost.seconds > ANNOUNCE_S and progress is not False
+    if announce:
+        print(f"{scenario.name}: estimated {cost}", file=sys.stderr)
     sim, law = build(scenario)
     fn, n_dev = batch_function(system, n_devices)
-    chunk = min(runs, chunk_size or 1024)
+    default_chunk = 1024
+    if chunk_size is None and announce:  # chunks of about 10 s: a progress bar with an ETA
+        default_chunk = int(max(1, min(1024, 10.0 * runs / cost.seconds)))
+    chunk = min(runs, chunk_size or default_chunk)
     chunk = -(-chunk // n_dev) * n_dev  # whole number of runs per device
     n_chunks = -(-runs // chunk)
 
     seed_arr = jnp.asarray(seed, dtype=jnp.uint32)
     compiled, compile_s = _compile(system, fn, n_dev, sim, law, seed_arr, chunk)
+    _check_memory(compiled, chunk, max_memory_fraction)
 
-    show = progress if progress is not None else (n_chunks > 1 and sys.stderr.isatty())
+    show = (
+        progress if progress is not None else (n_chunks > 1 and (sys.stderr.isatty() or announce))
+    )
     bar = None
     if show:
         bar = tqdm(total=runs, desc=scenario.name, unit="run", disable=not show)

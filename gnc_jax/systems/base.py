@@ -54,6 +54,8 @@ class AbstractSystem(abc.ABC):
         paper_labels: ``{summary key: label}`` for the paper-vs-gnc_jax tables.
         example: a packaged scenario name (or a TOML path) of this system.
         test_overrides: ``{"section.field": value}`` that make ``example`` cheap for tests.
+        step_seconds: measured wall seconds of one step (:meth:`steps_per_run`) on one core,
+            for the cost estimate.
         batch_tolerance: ``(rtol, atol)`` to which a vmapped batch reproduces the per-run
             program on float outcomes (integer outcomes must be equal): both compute the same
             run, but XLA compiles the two programs separately and may round differently.
@@ -71,6 +73,18 @@ class AbstractSystem(abc.ABC):
     example: ClassVar[str] = ""
     batch_tolerance: ClassVar[tuple[float, float]] = (1e-9, 1e-9)
     test_overrides: ClassVar[dict[str, Any]] = {}
+    step_seconds: ClassVar[float] = 1e-6
+
+    # ---- cost ----
+    def steps_per_run(self, config: dict) -> float | None:
+        """Simulation steps one run of a validated configuration takes (truth steps plus the
+        predictor and corrector work, in truth-step equivalents); ``None`` when unknown.
+
+        With ``step_seconds`` (wall seconds per step on one core of the development machine,
+        measured by ``benchmarks/cost_calibration.py``) it gives the cost estimate that
+        :func:`gnc_jax.run_study` checks before the reference design or compilation.
+        """
+        return None
 
     # ---- scenario ----
     def laws(self) -> dict[str, type]:
