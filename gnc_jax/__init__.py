@@ -16,10 +16,10 @@ alone; see ``gnc_jax._config``); import it before anything runs a JAX computatio
 
 from . import _config  # noqa: F401  (float64, host devices: must run before jax is used)
 from ._status import Status
-from .montecarlo import Study, build, run_key, run_study, simulate_one
+from .montecarlo import CostEstimate, Study, build, estimate_cost, run_key, run_study, simulate_one
 from .report import report
 from .reproduction import reproduce
-from .results import load_results
+from .results import ResultsError, load_results
 from .scenario import Scenario, ScenarioError, list_scenarios, load_scenario
 from .systems import AbstractSystem, get_system, register_system, systems
 
@@ -35,10 +35,13 @@ __all__ = [
     "systems",
     "run_key",
     "run_study",
+    "estimate_cost",
+    "CostEstimate",
     "simulate_one",
     "reproduce",
     "report",
     "load_results",
+    "ResultsError",
     "Scenario",
     "ScenarioError",
     "list_scenarios",

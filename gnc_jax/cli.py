@@ -9,14 +9,24 @@ errors answer at once, without starting JAX, and JAX is configured by ``gnc_jax`
 """
 
 import argparse
+import os
+import pathlib
+import re
 import sys
+import traceback
 
-EXIT_REFUSED = 2  # bad input, refused before anything was compiled
-EXIT_ALL_FAILED = 3  # the study ran (results written) but every run failed
+EXIT_REFUSED = 2  # bad input (or a runaway cost), refused before anything was compiled
+EXIT_FAILED_RUNS = 3  # the study ran and its results were written, but too many runs failed
+EXIT_INTERNAL = 4  # an unexpected error inside gnc_jax (a bug: please report it)
+EXIT_ALL_FAILED = EXIT_FAILED_RUNS  # earlier name
+MAX_FAILED = 0.01
+"""Default of ``--max-failed``: the fraction of failed runs above which a study exits 3."""
+DEBUG_ENV = "GNC_JAX_DEBUG"  # set to 1 to get the traceback of an internal error
 
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message):  # one line instead of usage + message
+        message = re.sub(r"^argument (\S+): \1: ", r"\1: ", message)  # our types name it
         self.exit(2, f"gnc-jax: error: {message} (see {self.prog} --help)\n")
 
 
@@ -45,6 +55,33 @@ def _seed(text):
     if not 0 <= value < 2**32:
         raise argparse.ArgumentTypeError(f"--seed: {value}; allowed: an integer in [0, 2^32)")
     return value
+
+
+def _fraction(name):
+    def parse(text):
+        try:
+            value = float(text)
+        except ValueError:
+            value = float("nan")
+        if not 0.0 <= value <= 1.0:
+            raise argparse.ArgumentTypeError(f"{name}: {text!r}; allowed: a number in [0, 1]")
+        return value
+
+    return parse
+
+
+def _hours(text):
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0.0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(f"--max-hours: {text!r}; allowed: a number > 0")
+    return value
+
+
+def _too_many_failed(summary: dict, max_failed: float) -> bool:
+    return summary["failed"] > max_failed * summary["runs"]
 
 
 def _print_summary(summary: dict) -> None:
@@ -123,6 +160,7 @@ def cmd_run(args) -> int:
         seed=args.seed,
         chunk_size=args.chunk_size,
         progress=False if args.no_progress else None,
+        max_hours=args.max_hours,
     )
     summary = study.summary()
     print(
@@ -135,9 +173,13 @@ def cmd_run(args) -> int:
     if args.out:
         paths = study.save(args.out)
         print("wrote " + ", ".join(paths.values()))
-    if summary["failed"] == summary["runs"]:
-        print(f"gnc-jax: every run failed ({summary['failed_by_status']})", file=sys.stderr)
-        return EXIT_ALL_FAILED
+    if _too_many_failed(summary, args.max_failed):
+        print(
+            f"gnc-jax: {summary['failed']} of {summary['runs']} runs failed "
+            f"({summary['failed_by_status']}), more than --max-failed {args.max_failed:g}",
+            file=sys.stderr,
+        )
+        return EXIT_FAILED_RUNS
     return 0
 
 
@@ -152,10 +194,21 @@ def cmd_reproduce(args) -> int:
         )
     _writable_dir(args.out)
 
-    reproduce(
-        args.out, runs=args.runs, only=args.only, progress=False if args.no_progress else None
+    summaries = reproduce(
+        args.out,
+        runs=args.runs,
+        only=args.only,
+        progress=False if args.no_progress else None,
+        max_hours=args.max_hours,
     )
     print(f"wrote {args.out}/reproduce.md")
+    bad = [s for s in summaries if _too_many_failed(s, args.max_failed)]
+    if bad:
+        names = ", ".join(f"{s['scenario']} ({s['failed']}/{s['runs']})" for s in bad)
+        print(
+            f"gnc-jax: failed runs above --max-failed {args.max_failed:g}: {names}", file=sys.stderr
+        )
+        return EXIT_FAILED_RUNS
     return 0
 
 
@@ -165,6 +218,24 @@ def cmd_report(args) -> int:
     for path in report(args.dir, args.out):
         print(f"wrote {path}")
     return 0
+
+
+def _study_limits(q) -> None:
+    from .montecarlo import MAX_HOURS
+
+    q.add_argument(
+        "--max-hours",
+        type=_hours,
+        default=MAX_HOURS,
+        help=f"refuse a study whose cost estimate exceeds this (default {MAX_HOURS:g} h)",
+    )
+    q.add_argument(
+        "--max-failed",
+        type=_fraction("--max-failed"),
+        default=MAX_FAILED,
+        help=f"exit {EXIT_FAILED_RUNS} when more than this fraction of runs failed "
+        f"(default {MAX_FAILED:g})",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -198,6 +269,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="runs per compiled call (results do not depend on it)",
     )
     q.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _study_limits(q)
     q.set_defaults(func=cmd_run)
 
     q = sub.add_parser("reproduce", help="every paper scenario, paper vs gnc_jax")
@@ -210,6 +282,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     q.add_argument("--only", nargs="+", default=None, help="only these scenarios")
     q.add_argument("--no-progress", action="store_true")
+    _study_limits(q)
     q.set_defaults(func=cmd_reproduce)
 
     q = sub.add_parser("report", help="PNG figures of a study directory")
@@ -223,13 +296,29 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     import gnc_jax  # noqa: F401  (float64 and host devices before JAX starts)
 
+    from .results import ResultsError
     from .scenario import ScenarioError
 
     try:
         return args.func(args)
-    except (ScenarioError, FileNotFoundError) as e:
+    except (ScenarioError, ResultsError) as e:
         print(f"gnc-jax: error: {e}", file=sys.stderr)
         return EXIT_REFUSED
+    except KeyboardInterrupt:
+        print("gnc-jax: interrupted", file=sys.stderr)
+        return 130
+    except Exception as e:  # a bug: one line, the traceback on request
+        if os.environ.get(DEBUG_ENV):
+            raise
+        where = traceback.extract_tb(e.__traceback__)[-1]
+        first = str(e).splitlines()[0] if str(e) else ""
+        print(
+            f"gnc-jax: internal error: {type(e).__name__}: {first}"
+            f" (at {pathlib.Path(where.filename).name}:{where.lineno}; this is a bug, please "
+            f"report it; {DEBUG_ENV}=1 shows the traceback)",
+            file=sys.stderr,
+        )
+        return EXIT_INTERNAL
 
 
 if __name__ == "__main__":

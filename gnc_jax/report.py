@@ -5,7 +5,7 @@ The figures are the study's system's (:meth:`gnc_jax.systems.AbstractSystem.figu
 
 import pathlib
 
-from .results import load_results
+from .results import ResultsError, load_results
 
 
 def report(run_dir, out_dir=None) -> list[str]:
@@ -17,5 +17,16 @@ def report(run_dir, out_dir=None) -> list[str]:
     """
     summary, runs, scenario = load_results(run_dir)
     out = pathlib.Path(out_dir or run_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    return [str(p) for p in scenario.system.figures(summary, runs, scenario, out)]
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise ResultsError(f"{out}: cannot create ({e.strerror or e})") from None
+    try:
+        return [str(p) for p in scenario.system.figures(summary, runs, scenario, out)]
+    except KeyError as e:
+        raise ResultsError(
+            f"{pathlib.Path(run_dir)}: runs.parquet or summary.json lacks {e} (written by "
+            "another gnc_jax version or edited?)"
+        ) from None
+    except PermissionError as e:
+        raise ResultsError(f"{e.filename}: cannot write ({e.strerror})") from None

@@ -32,7 +32,9 @@ def markdown_table(summaries: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def reproduce(out_dir, runs: int | None = None, only=None, progress=None, echo=print) -> list:
+def reproduce(
+    out_dir, runs: int | None = None, only=None, progress=None, echo=print, max_hours=None
+) -> list:
     """Run every packaged scenario at its paper run count (or ``runs``), save and compare.
 
     Writes ``out_dir/<scenario>/`` (summary.json, runs.parquet, scenario.toml) and
@@ -46,7 +48,8 @@ def reproduce(out_dir, runs: int | None = None, only=None, progress=None, echo=p
             continue
         n = runs or scenario.runs
         echo(f"== {scenario.name}: {n} runs ({scenario.reference})")
-        study = run_study(scenario, runs=n, progress=progress)
+        limits = {} if max_hours is None else {"max_hours": max_hours}
+        study = run_study(scenario, runs=n, progress=progress, **limits)
         study.save(out / scenario.name)
         s = study.summary()
         summaries.append(s)

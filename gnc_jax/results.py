@@ -16,7 +16,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from ._status import Status
-from .scenario import load_scenario
+from .scenario import ScenarioError, load_scenario
 from .systems.base import get_system
 
 
@@ -89,14 +89,75 @@ def save_study(study, out_dir) -> dict[str, str]:
     return {k: str(v) for k, v in paths.items()}
 
 
+class ResultsError(ValueError):
+    """A results directory that cannot be read: the message is one line naming the file and
+    what is wrong with it."""
+
+
+_SUMMARY_KEYS = ("scenario", "kind", "runs", "failed")
+
+
+def _read_summary(path: pathlib.Path) -> dict:
+    try:
+        summary = json.loads(path.read_text())
+    except UnicodeDecodeError:
+        raise ResultsError(f"{path}: not UTF-8 text (damaged?)") from None
+    except json.JSONDecodeError as e:
+        raise ResultsError(
+            f"{path}: not valid JSON ({e.msg} at line {e.lineno}; damaged or truncated?)"
+        ) from None
+    if not isinstance(summary, dict) or any(k not in summary for k in _SUMMARY_KEYS):
+        missing = [k for k in _SUMMARY_KEYS if not isinstance(summary, dict) or k not in summary]
+        raise ResultsError(f"{path}: not a gnc_jax summary (missing {', '.join(missing)})")
+    runs = summary["runs"]
+    if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
+        raise ResultsError(f"{path}: 'runs' is {runs!r}; expected an integer >= 1")
+    return summary
+
+
+def _read_runs(path: pathlib.Path, n_runs: int) -> dict:
+    try:
+        table = pq.read_table(path)
+    except (pa.ArrowException, OSError) as e:
+        first = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise ResultsError(f"{path}: not a readable Parquet file ({first}; truncated?)") from None
+    if "status" not in table.column_names:
+        raise ResultsError(f"{path}: no 'status' column; not written by gnc_jax")
+    if table.num_rows != n_runs:
+        raise ResultsError(
+            f"{path}: {table.num_rows} rows, but summary.json says {n_runs} runs (partial or "
+            "mixed-up files?)"
+        )
+    return {c: table.column(c).to_numpy(zero_copy_only=False) for c in table.column_names}
+
+
 def load_results(out_dir) -> tuple[dict, "Any", "Any"]:
-    """Read back ``(summary, runs table as a dict of numpy arrays, scenario)`` from a run dir."""
+    """Read back ``(summary, runs table as a dict of numpy arrays, scenario)`` from a run dir.
+
+    Raises:
+        ResultsError: a missing directory or file, or a damaged, truncated or inconsistent
+            one; the message names the file.
+    """
     out = pathlib.Path(out_dir)
+    if not out.is_dir():
+        raise ResultsError(
+            f"{out}: no such directory; allowed: a directory written by `gnc-jax run ... --out DIR`"
+        )
     for name in ("summary.json", "runs.parquet", "scenario.toml"):
         if not (out / name).is_file():
-            raise FileNotFoundError(f"{out / name}: missing; run `gnc-jax run ... --out {out}`")
-    summary = json.loads((out / "summary.json").read_text())
-    table = pq.read_table(out / "runs.parquet")
-    runs = {c: table.column(c).to_numpy(zero_copy_only=False) for c in table.column_names}
-    scenario = load_scenario(out / "scenario.toml")
+            raise ResultsError(f"{out / name}: missing; run `gnc-jax run ... --out {out}`")
+    try:
+        summary = _read_summary(out / "summary.json")
+        runs = _read_runs(out / "runs.parquet", summary["runs"])
+    except PermissionError as e:
+        raise ResultsError(f"{e.filename}: cannot read ({e.strerror})") from None
+    try:
+        scenario = load_scenario(out / "scenario.toml")
+    except ScenarioError as e:
+        raise ResultsError(f"{out / 'scenario.toml'}: {e}") from None
+    if scenario.kind != summary["kind"]:
+        raise ResultsError(
+            f"{out / 'scenario.toml'}: kind {scenario.kind!r}, but summary.json says "
+            f"{summary['kind']!r} (mixed-up files?)"
+        )
     return summary, runs, scenario

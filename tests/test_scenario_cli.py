@@ -50,7 +50,7 @@ BAD_INPUT = [
     (["run", "autonav-predictive", "--set", "camera.max_bin_log2=5"], "camera.max_bin_log2: 5"),
     (
         ["run", "autonav-predictive", "--set", "dynamics.sun_direction=[0.0,0.0,0.0]"],
-        "dynamics.sun_direction: must be non-zero",
+        "dynamics.sun_direction: [0.0, 0.0, 0.0] has length 0; allowed: a direction of length in [1e-6, 1e6]",
     ),
 ]
 APN = "bennu-apn"
@@ -202,6 +202,9 @@ def test_run_writes_results_and_report(tmp_path, capsys):
 
 def test_report_of_missing_dir_is_an_error(tmp_path, capsys):
     assert cli.main(["report", str(tmp_path / "nothing")]) == 2
+    assert "nothing: no such directory" in capsys.readouterr().err
+    (tmp_path / "empty").mkdir()
+    assert cli.main(["report", str(tmp_path / "empty")]) == 2
     assert "summary.json: missing" in capsys.readouterr().err
 
 
@@ -298,6 +301,6 @@ def test_a_study_whose_every_run_failed_exits_3(tmp_path, capsys, monkeypatch):
     toy = pathlib.Path(__file__).with_name("toy.toml")
     out = tmp_path / "toy"
     assert cli.main(["run", str(toy), "--runs", "4", "--out", str(out), "--no-progress"]) == 3
-    assert "every run failed" in capsys.readouterr().err
+    assert "4 of 4 runs failed" in capsys.readouterr().err
     summary = json.loads((out / "summary.json").read_text())
     assert summary["failed"] == 4 and summary["failed_by_status"] == {"nan": 4}

@@ -40,7 +40,10 @@ class RelativeDynamics(eqx.Module):
     def gravity(self, r: Vector3) -> Vector3:
         """Differential gravitational acceleration at ``r``, m/s^2."""
         r2 = jnp.dot(r, r)
-        point_mass = -self.mu_target * r / (r2 * jnp.sqrt(r2))
+        # At the centre itself (a zero-error approach aims exactly there) the term is 0, not NaN.
+        centre = r2 == 0.0
+        r2 = jnp.where(centre, 1.0, r2)
+        point_mass = jnp.where(centre, 0.0, -self.mu_target * r / (r2 * jnp.sqrt(r2)))
         s = self.sun_direction
         tide = self.tide_rate2 * (3.0 * jnp.dot(r, s) * s - r)
         return point_mass + tide

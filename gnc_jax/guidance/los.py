@@ -13,6 +13,7 @@ from typing import NamedTuple
 import equinox as eqx
 import jax.numpy as jnp
 
+from .._numerics import safe_norm
 from .._types import Scalar
 from ..geometry.ellipse import b_plane_position_covariance, mean_position_error
 from ..geometry.los import los_rate, range_rate, zero_effort_miss
@@ -37,6 +38,21 @@ def switching_curve(rho, rho_dot_scalar, rho_limit):
     arg = rho**4 - rho_limit**2 * rho**2
     ok = arg > 0.0
     return jnp.where(ok, -rho_limit * rho_dot_scalar / jnp.sqrt(jnp.where(ok, arg, 1.0)), jnp.inf)
+
+
+def miss_limits(k1, k2, sigma_b, rho_n, nav, ctx: ImpactorGuidanceContext):
+    """``(rho_min, rho_max)``: the shut-off and opening miss tolerances, k2 sigma_B and
+    k1 sigma_B (seed 000 §3.3), neither below half the miss one control step's burn moves.
+
+    One control step of thrust changes the predicted miss by about (T/m) dt t_go; a shut-off
+    tolerance below half of that cannot be met by whole steps, and with perfect navigation
+    (sigma_B -> 0) the engine would never close. The floor binds only then: in the paper
+    scenarios k2 sigma_B is larger (see the regression test of a zero-error run).
+    """
+    t_go = rho_n / safe_norm(nav.v)
+    resolution = 0.5 * ctx.engine.thrust_n / ctx.mass_kg * ctx.dt_s * t_go
+    rho_min = jnp.maximum(k2 * sigma_b, resolution)
+    return rho_min, jnp.maximum(k1 * sigma_b, rho_min)
 
 
 class LOSGuidanceState(NamedTuple):
@@ -103,8 +119,9 @@ class LOSSwitchingCurveGuidance(AbstractImpactorGuidance):
         rho_n = jnp.linalg.norm(rho)
         rdot = range_rate(rho, rho_dot)
         omega = jnp.linalg.norm(los_rate(rho, rho_dot))
-        w_open = switching_curve(rho_n, rdot, self.k1 * state.sigma_b_m)
-        w_close = switching_curve(rho_n, rdot, self.k2 * state.sigma_b_m)
+        rho_close, rho_open = miss_limits(self.k1, self.k2, state.sigma_b_m, rho_n, nav, ctx)
+        w_open = switching_curve(rho_n, rdot, rho_open)
+        w_close = switching_curve(rho_n, rdot, rho_close)
         temperature = self.temperature if self.relaxed else None
         on = schmitt_trigger(omega, state.engine_on, w_open, w_close, temperature)
         on = jnp.where(t < ctx.cutoff_time_s, on, 0.0)

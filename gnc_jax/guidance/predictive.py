@@ -66,15 +66,28 @@ class PredictiveGuidance(AbstractImpactorGuidance):
     def check(cls, section, config):
         cam, g = config["camera"], config["guidance"]
         bt = section["burn_times_s"]
-        t_cut = time_of_flight_s(config) - g["cutoff_tgo_s"]
-        if any(b2 - b1 < cam["image_interval_s"] for b1, b2 in zip(bt, bt[1:])) or any(
-            b >= t_cut for b in bt
-        ):
+        if any(b2 <= b1 for b1, b2 in zip(bt, bt[1:])):
             raise ScenarioError(
-                f"guidance.predictive.burn_times_s: {bt}; allowed: increasing, at least one "
-                f"image interval ({cam['image_interval_s']:g} s) apart, each before the cut-off "
-                f"at {t_cut:g} s"
+                f"guidance.predictive.burn_times_s: {bt} s; allowed: increasing mission times"
             )
+        t_cut = time_of_flight_s(config) - g["cutoff_tgo_s"]
+        late = [b for b in bt if b >= t_cut]
+        if late:
+            raise ScenarioError(
+                f"guidance.predictive.burn_times_s: the burn at {late[0]:g} s is not before the "
+                f"cut-off at {t_cut:g} s (time of flight - guidance.cutoff_tgo_s = "
+                f"{g['cutoff_tgo_s']:g} s); allowed: burns before {t_cut:g} s, or "
+                f"guidance.cutoff_tgo_s < {time_of_flight_s(config) - max(bt):g} s"
+            )
+        for b1, b2 in zip(bt, bt[1:]):
+            if b2 - b1 < cam["image_interval_s"]:
+                gap = f"the burns at {b1:g} and {b2:g} s of guidance.predictive.burn_times_s"
+                raise ScenarioError(
+                    f"camera.image_interval_s: {cam['image_interval_s']:g} s is longer than the "
+                    f"{b2 - b1:g} s between {gap} (one image between burns); allowed: "
+                    f"image_interval_s <= {b2 - b1:g} s, or burns increasing and at least one "
+                    "image interval apart"
+                )
 
     def init(self, nav, ctx: ImpactorGuidanceContext) -> PredictiveGuidanceState:
         z = jnp.zeros(())

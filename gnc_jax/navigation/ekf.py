@@ -14,6 +14,8 @@ import jax.numpy as jnp
 from .._types import Array, Covariance6, Float, Matrix3, State6, Vector3
 from .camera import los_angles
 
+_S_FLOOR = 1e-200  # added to the innovation covariance's diagonal (see ekf_update)
+
 
 class NavEstimate(NamedTuple):
     x: State6  # (r m, v m/s)
@@ -89,6 +91,10 @@ def ekf_update(
         The updated estimate and the innovation z - h(x_hat).
     """
     hj, r_meas, s = predicted.jacobian, predicted.r_cov, predicted.s
+    # A filter that is certain (P = 0) of a noiseless measurement (R = 0) has S = 0 and gains
+    # nothing from the image: K = P H^T S^-1 = 0. The floor (far below any real S) keeps the
+    # solve finite there and changes nothing elsewhere.
+    s = s + _S_FLOOR * jnp.eye(s.shape[0])
     k = jnp.linalg.solve(s, hj @ nav.p).T
     innovation = z - predicted.z
     x = nav.x + k @ innovation

@@ -10,31 +10,58 @@ from .schema import Field, ScenarioError
 
 F = Field
 
+MIN_RANGE_RADII = 2.0  # the approach starts at least this many target radii away
+MIN_SPEED_KMPS = 1e-3
+MAX_TOF_S = 30 * 86400.0  # a terminal phase; longer approaches are cruise (midcourse system)
+MIN_SUN_AU = 0.01
+MAX_TIDE_RATIO = 0.05  # |r| / Sun distance of the linearised tide
+MIN_IMAGES = 2
+
 SCHEMA = {
     "approach": {
         "position_km": F(
             "floats",
             [73440.0, 0.0, 0.0],
             length=3,
+            lo=-1e7,
+            hi=1e7,
             units="km",
-            doc="nominal initial position of the impactor relative to the target",
+            doc="nominal initial position of the impactor relative to the target; |r| in "
+            f"({MIN_RANGE_RADII:g} target radii, 1e7 km]: a terminal approach (the B-plane frame "
+            "is fixed by the initial relative velocity, the solar tide is linearised in |r|)",
         ),
         "velocity_kmps": F(
             "floats",
             [-10.2, 0.0, 0.0],
             length=3,
+            lo=-100.0,
+            hi=100.0,
             units="km/s",
-            doc="nominal relative velocity (defines the B-plane S axis)",
+            doc="nominal relative velocity (defines the B-plane S axis); speed in "
+            f"[{MIN_SPEED_KMPS * 1e3:g} m/s, 100 km/s]: an impact, not a rendezvous",
         ),
         "reference_normal": F(
             "floats",
             [0.0, 0.0, 1.0],
             length=3,
-            doc="normal h of the B-plane reference plane (T = S x h)",
+            lo=-1e6,
+            hi=1e6,
+            doc="normal h of the B-plane reference plane (T = S x h); a direction: its length "
+            "is ignored but must be in [1e-6, 1e6]",
         ),
     },
     "spacecraft": {
-        "mass_kg": F("float", 372.0, lo=0.0, lo_open=True, hi=1e5, units="kg"),
+        "mass_kg": F("float", 372.0, lo=0.0, lo_open=True, hi=1e5, units="kg", doc="wet mass"),
+        "propellant_kg": F(
+            "float",
+            25.0,
+            lo=0.0,
+            hi=1e5,
+            units="kg",
+            doc="usable propellant, less than mass_kg (not in the paper: 25 kg, ~150 m/s at "
+            "230 s on 372 kg, well above the paper's 9.1 m/s); a run that needs more is "
+            "flagged 'propellant'",
+        ),
         "thrust_n": F("float", 88.0, lo=0.0, lo_open=True, hi=1e4, units="N"),
         "isp_s": F(
             "float",
@@ -61,13 +88,18 @@ SCHEMA = {
             lo=0.0,
             hi=100.0,
             units="AU",
-            doc="target's heliocentric distance for the solar tide; 0 = off",
+            doc="target's heliocentric distance for the solar tide; 0 = off, else at least "
+            f"{MIN_SUN_AU:g} AU and {1 / MAX_TIDE_RATIO:g} x the approach range (the tide is "
+            "linearised in range / Sun distance)",
         ),
         "sun_direction": F(
             "floats",
             [1.0, 0.0, 0.0],
             length=3,
-            doc="direction from the target to the Sun (solar tide; image front-end lighting)",
+            lo=-1e6,
+            hi=1e6,
+            doc="direction from the target to the Sun (solar tide; image front-end lighting); "
+            "length in [1e-6, 1e6]",
         ),
         "coast_steps": F(
             "int", 4, lo=1, hi=10000, doc="RK4 steps of the final coast to the B-plane"
@@ -161,11 +193,11 @@ SCHEMA = {
         "dt_s": F(
             "float",
             1.0,
-            lo=0.0,
-            lo_open=True,
+            lo=0.01,
             hi=60.0,
             units="s",
-            doc="control step; must divide the image interval",
+            doc="control step; must divide the image interval (>= 0.01 s: finer than any "
+            "attitude or thruster response the models resolve)",
         ),
         "aim_initial_km": F(
             "floats",
@@ -207,18 +239,50 @@ def time_of_flight_s(cfg: dict) -> float:
     return -sum(a * b for a, b in zip(r, v)) / vv
 
 
+def _norm(v) -> float:
+    return math.hypot(*v)
+
+
+def _direction(name: str, v) -> list[float]:
+    """Unit vector of a direction field whose length must be in [1e-6, 1e6]."""
+    n = _norm(v)
+    if not 1e-6 <= n <= 1e6:
+        raise ScenarioError(
+            f"{name}: {v} has length {n:.3g}; allowed: a direction of length in [1e-6, 1e6]"
+        )
+    return [x / n for x in v]
+
+
 def check(cfg: dict) -> None:
-    """Cross-field checks of a validated impactor configuration."""
-    a, g, cam = cfg["approach"], cfg["guidance"], cfg["camera"]
+    """Cross-field and physical-domain checks of a validated impactor configuration."""
+    a, g, cam, dy = cfg["approach"], cfg["guidance"], cfg["camera"], cfg["dynamics"]
+    sc = cfg["spacecraft"]
     v = a["velocity_kmps"]
-    if math.hypot(*v) == 0.0:
-        raise ScenarioError("approach.velocity_kmps: must be non-zero")
-    h = a["reference_normal"]
-    cross = [v[1] * h[2] - v[2] * h[1], v[2] * h[0] - v[0] * h[2], v[0] * h[1] - v[1] * h[0]]
-    if math.hypot(*cross) <= 1e-9 * math.hypot(*v) * max(math.hypot(*h), 1e-300):
+    speed = _norm(v)
+    if not MIN_SPEED_KMPS <= speed <= 100.0:
+        raise ScenarioError(
+            f"approach.velocity_kmps: speed {speed:.3g} km/s; allowed: a speed in "
+            f"[{MIN_SPEED_KMPS:g}, 100] km/s (an impact, not a rendezvous)"
+        )
+    v_hat = [x / speed for x in v]
+    h = _direction("approach.reference_normal", a["reference_normal"])
+    cross = [
+        v_hat[1] * h[2] - v_hat[2] * h[1],
+        v_hat[2] * h[0] - v_hat[0] * h[2],
+        v_hat[0] * h[1] - v_hat[1] * h[0],
+    ]
+    if _norm(cross) < 1e-6:
         raise ScenarioError(
             "approach.reference_normal: parallel to the approach velocity (B-plane T axis "
             "undefined); allowed: any vector not parallel to approach.velocity_kmps"
+        )
+    _direction("dynamics.sun_direction", dy["sun_direction"])
+    r = _norm(a["position_km"])
+    radius = max(cfg["target"]["semi_axes_km"])
+    if not MIN_RANGE_RADII * radius < r <= 1e7:
+        raise ScenarioError(
+            f"approach.position_km: range {r:.4g} km; allowed: more than {MIN_RANGE_RADII:g} "
+            f"target radii ({MIN_RANGE_RADII * radius:g} km) and at most 1e7 km"
         )
     tof = time_of_flight_s(cfg)
     if tof <= 0.0:
@@ -226,23 +290,50 @@ def check(cfg: dict) -> None:
             "approach.velocity_kmps: the impactor must approach the target "
             "(position . velocity < 0)"
         )
+    if tof > MAX_TOF_S:
+        raise ScenarioError(
+            f"approach: time of flight {tof / 86400:.3g} days (range / closing speed); allowed: "
+            f"at most {MAX_TOF_S / 86400:g} days (a terminal phase: the B-plane frame is fixed "
+            "by the initial velocity; longer approaches are a midcourse problem)"
+        )
+    au_km = 1.495978707e8
+    d = dy["sun_distance_au"]
+    if d != 0.0 and not (d >= MIN_SUN_AU and r <= MAX_TIDE_RATIO * d * au_km):
+        raise ScenarioError(
+            f"dynamics.sun_distance_au: {d:g} AU; allowed: 0 (no solar tide) or at least "
+            f"{max(MIN_SUN_AU, r / (MAX_TIDE_RATIO * au_km)):.3g} AU ({MIN_SUN_AU:g} AU and "
+            f"{1 / MAX_TIDE_RATIO:g} x the approach range: the tide is linearised)"
+        )
+    if not sc["propellant_kg"] < sc["mass_kg"]:
+        raise ScenarioError(
+            f"spacecraft.propellant_kg: {sc['propellant_kg']:g} kg is not less than "
+            f"spacecraft.mass_kg = {sc['mass_kg']:g} kg; allowed: [0, mass_kg)"
+        )
     ratio = cam["image_interval_s"] / g["dt_s"]
-    if abs(ratio - round(ratio)) > 1e-9:
+    if abs(ratio - round(ratio)) > 1e-9 * ratio:
         raise ScenarioError(
             f"guidance.dt_s: {g['dt_s']:g} s does not divide camera.image_interval_s = "
             f"{cam['image_interval_s']:g} s; allowed: image_interval_s / n for a whole n"
         )
     if not g["cutoff_tgo_s"] < tof:
-        raise ScenarioError(f"guidance.cutoff_tgo_s: allowed: [0, {tof:g}) s (time of flight)")
+        raise ScenarioError(
+            f"guidance.cutoff_tgo_s: {g['cutoff_tgo_s']:g} s; allowed: [0, {tof:g}) s (less "
+            "than the time of flight)"
+        )
     if not g["retarget_tgo_s"] < tof:
-        raise ScenarioError(f"guidance.retarget_tgo_s: allowed: [0, {tof:g}) s")
+        raise ScenarioError(
+            f"guidance.retarget_tgo_s: {g['retarget_tgo_s']:g} s; allowed: [0, {tof:g}) s "
+            "(less than the time of flight)"
+        )
+    images = (tof - g["cutoff_tgo_s"]) / cam["image_interval_s"]
+    if images < MIN_IMAGES:
+        raise ScenarioError(
+            f"camera.image_interval_s: {cam['image_interval_s']:g} s leaves {images:.3g} images "
+            f"before the cut-off; allowed: at most "
+            f"{(tof - g['cutoff_tgo_s']) / MIN_IMAGES:.4g} s ({MIN_IMAGES} images)"
+        )
     if cam["window_px"] % 2 == 0 or cam["window_px"] > cam["roi_px"] - 4:
         raise ScenarioError(
             f"camera.window_px: {cam['window_px']}; allowed: an odd number <= camera.roi_px - 4 "
             f"= {cam['roi_px'] - 4}"
-        )
-    sun = cfg["dynamics"]["sun_direction"]
-    if math.hypot(*sun) == 0.0:
-        raise ScenarioError(
-            "dynamics.sun_direction: must be non-zero; allowed: any non-zero vector"
         )

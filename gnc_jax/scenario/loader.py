@@ -13,6 +13,8 @@ from ..systems.base import get_system
 from .schema import ScenarioError, parse_override
 
 _META_FIELDS = {"name", "kind", "description", "reference", "runs", "seed"}
+MAX_RUNS = 10**9
+"""Largest run count a scenario may name (the cost estimate refuses long studies anyway)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -100,11 +102,11 @@ def _build(meta: dict, raw: dict, paper: dict, source: str) -> Scenario:
     kind = meta.get("kind")
     system = get_system(kind) if isinstance(kind, str) else get_system(repr(kind))
     runs = meta.get("runs", 100)
-    if isinstance(runs, bool) or not isinstance(runs, int) or runs <= 0:
-        raise ScenarioError(f"scenario.runs: {runs!r}; allowed: an integer >= 1")
+    if isinstance(runs, bool) or not isinstance(runs, int) or not 0 < runs <= MAX_RUNS:
+        raise ScenarioError(f"scenario.runs: {runs!r}; allowed: an integer in [1, {MAX_RUNS:g}]")
     seed = meta.get("seed", 0)
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ScenarioError(f"scenario.seed: {seed!r}; allowed: an integer >= 0")
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**32:
+        raise ScenarioError(f"scenario.seed: {seed!r}; allowed: an integer in [0, 2^32)")
     for k, v in paper.items():
         if isinstance(v, bool) or not isinstance(v, (int, float, str)):
             raise ScenarioError(f"paper.{k}: expected a number or text, got {v!r}")
@@ -148,7 +150,13 @@ def load_scenario(name_or_path: str | pathlib.Path, overrides=()) -> Scenario:
                 f"scenario: no such file {text!r}; allowed: a packaged name "
                 f"({', '.join(packaged_names())}) or an existing .toml file"
             )
-        data, source = path.read_bytes(), str(path)
+        try:
+            data, source = path.read_bytes(), str(path)
+        except OSError as e:
+            raise ScenarioError(
+                f"scenario: cannot read {text!r} ({e.strerror or e}); allowed: a readable "
+                ".toml file"
+            ) from None
     else:
         if text not in packaged_names():
             raise ScenarioError(
@@ -158,10 +166,21 @@ def load_scenario(name_or_path: str | pathlib.Path, overrides=()) -> Scenario:
         data, source = (_files() / f"{text}.toml").read_bytes(), f"packaged:{text}"
     try:
         raw = tomllib.loads(data.decode())
+    except UnicodeDecodeError as e:
+        raise ScenarioError(
+            f"scenario {source}: not UTF-8 text (byte {e.start}: {e.reason}); allowed: a TOML "
+            "file encoded in UTF-8"
+        ) from None
     except tomllib.TOMLDecodeError as e:
         raise ScenarioError(f"scenario {source}: not valid TOML ({e})") from None
     meta = raw.pop("scenario", {})
     paper = raw.pop("paper", {})
+    for table, value in (("scenario", meta), ("paper", paper)):
+        if not isinstance(value, dict):
+            raise ScenarioError(
+                f"{table}: expected a table [{table}], got {value!r}; allowed: a [{table}] "
+                "table of fields"
+            )
     scenario = _build(meta, raw, paper, source)
     return scenario.with_overrides(overrides) if overrides else scenario
 

@@ -17,6 +17,7 @@ import jax.numpy as jnp
 
 from .._numerics import safe_norm
 from .._random import stream_key, stream_normal
+from .._status import Status
 from .._types import Array, Float, PRNGKeyArray, Scalar, Vector3
 from ..dynamics.impactor import (
     G0,
@@ -170,7 +171,8 @@ class ImpactorSimulation(eqx.Module):
     Attributes:
         r0_m, v0_mps: nominal initial state of the impactor relative to the target, inertial.
         context: on-board mission data (B-plane frame, aim points, engine, timing).
-        dynamics: true differential gravity; engine: true nominal engine; mass_kg: initial mass.
+        dynamics: true differential gravity; engine: true nominal engine; mass_kg: initial mass;
+        propellant_kg: usable propellant (a run that burns more is flagged ``propellant``).
         errors: 1-sigma error sources.
         focal_length_m: camera focal length.
         process_noise_m2s3: white-acceleration density of the filter's process noise.
@@ -190,6 +192,7 @@ class ImpactorSimulation(eqx.Module):
     dynamics: RelativeDynamics
     engine: Engine
     mass_kg: Scalar
+    propellant_kg: Scalar
     errors: ImpactorErrors
     focal_length_m: Scalar
     process_noise_m2s3: Scalar
@@ -459,7 +462,9 @@ def simulate(
     )
     image_step = functools.partial(_image_step, sim, law, key, draws, record)
     carry, rec = jax.lax.scan(image_step, carry0, jnp.arange(sim.n_images))
-    return with_status(_outcome(sim, carry, draws)), flatten_trace(rec)
+    outcome = _outcome(sim, carry, draws)
+    failures = ((outcome.fuel_kg > sim.propellant_kg, Status.propellant),)
+    return with_status(outcome, failures), flatten_trace(rec)
 
 
 def build(scenario) -> ImpactorSimulation:
@@ -515,6 +520,7 @@ def build(scenario) -> ImpactorSimulation:
         dynamics=dynamics,
         engine=engine,
         mass_kg=f(sc["mass_kg"]),
+        propellant_kg=f(sc["propellant_kg"]),
         errors=errors,
         focal_length_m=f(cam["focal_length_m"]),
         process_noise_m2s3=f(nv["process_noise_m2s3"]),

@@ -127,15 +127,16 @@ class AbstractSystem(abc.ABC):
         return out
 
     def validate(self, raw: dict, where: str = "") -> dict:
-        """Fill defaults and check ``raw`` (types, ranges, then :meth:`check`)."""
+        """Fill defaults and check ``raw`` (types, ranges, :meth:`check`, then the law's
+        ``check``)."""
         laws = self.laws()
         chosen = self.law_name(raw)
         optional = {f"guidance.{n}" for n in laws if n != chosen}
         config = validate(raw, self.schema(), where, optional)
+        self.check(config)  # the system's domain first: the laws' checks may rely on it
         if laws:
             law = laws[config["guidance"]["law"]]
             law.check(config["guidance"][law.law_name], config)
-        self.check(config)
         return config
 
     def check(self, config: dict) -> None:

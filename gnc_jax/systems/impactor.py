@@ -8,6 +8,7 @@ summary statistics and the report figures.
 """
 
 import dataclasses
+import math
 import pathlib
 from typing import Any, ClassVar
 
@@ -245,6 +246,25 @@ class ImpactorSystem(AbstractSystem):
         "guidance.retarget_tgo_s": 300.0,
         "guidance.predictive.burn_times_s": [150.0, 450.0, 660.0],
     }
+
+    # Cost model (benchmarks/cost_calibration.py): a control step costs ~1.1 us on one core;
+    # an image costs IMAGE_STEPS control steps with the Gaussian front end and, with rendered
+    # frames, more in proportion to the rays traced and the labelling sweeps.
+    step_seconds: ClassVar[float] = 1.1e-6
+    IMAGE_STEPS: ClassVar[float] = 2.0
+    RENDER_STEPS: ClassVar[float] = 230.0  # per image, at the default camera (32 rays, ROI 32)
+
+    def steps_per_run(self, config):
+        g, cam = config["guidance"], config["camera"]
+        interval = cam["image_interval_s"]
+        tof = impactor_scenario.time_of_flight_s(config)
+        n_images = max(math.ceil((tof - g["cutoff_tgo_s"]) / interval - 1e-9), 1)  # as built
+        per_image = interval / g["dt_s"] + self.IMAGE_STEPS
+        if config["navigation"]["measurement"] == "image":
+            rays = (cam["samples"] / 32) ** 2
+            labelling = (cam["roi_px"] / 32) ** 2 * cam["label_iterations"] / 24
+            per_image += self.RENDER_STEPS * 0.5 * (rays + labelling)
+        return n_images * per_image + config["dynamics"]["coast_steps"]
 
     def schema(self):
         """The sections, with ``navigation.measurement`` choosing among the registered front

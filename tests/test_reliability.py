@@ -1,0 +1,313 @@
+"""Issue #13: every input is refused in one line or run to an honest outcome.
+
+Each case found by trying the package as a new user would (hostile or unusual input to
+``run``, ``reproduce`` and ``report``) is a regression test here: the refusal names the field,
+the value and what is allowed, and comes before the reference design or any compilation; a
+run that leaves its model's domain is a failure status, never ``ok``. The capsule's cases are
+in ``test_reliability_capsule.py``, midcourse and intercept in
+``test_reliability_midcourse_intercept.py``, random scenarios in ``test_fuzz.py``.
+"""
+
+import json
+import pathlib
+import shutil
+
+import numpy as np
+import pytest
+
+import gnc_jax as gj
+from gnc_jax import cli, montecarlo
+from gnc_jax.scenario import ScenarioError
+
+TOY = pathlib.Path(__file__).with_name("toy.toml")
+
+ZERO_ERRORS = {
+    **{
+        f"errors.{k}": 0.0
+        for k in (
+            "delivery_position_km",
+            "image_processing_urad",
+            "attitude_control_urad",
+            "attitude_bias_urad",
+            "attitude_noise_urad",
+            "accel_bias_ug",
+            "accel_noise_ug",
+            "burn_magnitude_pct",
+        )
+    },
+    "navigation.knowledge_position_km": [0.0, 0.0, 0.0],
+    "navigation.knowledge_velocity_mps": 0.0,
+}
+
+
+def refused(argv, capsys, monkeypatch) -> str:
+    """Run the CLI expecting a refusal before anything is built or compiled; its one line."""
+
+    def no_compile(*args, **kwargs):
+        raise AssertionError("compiled or built before refusing")
+
+    monkeypatch.setattr(montecarlo, "build", no_compile)
+    monkeypatch.setattr(montecarlo, "_compile", no_compile)
+    assert cli.main(argv) == cli.EXIT_REFUSED
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("gnc-jax: error: "), err
+    return err
+
+
+# ---- tracebacks that became one line -------------------------------------------------------
+
+
+def test_a_toml_that_is_not_utf8_is_refused(tmp_path, capsys, monkeypatch):
+    path = tmp_path / "latin1.toml"
+    path.write_bytes(b'[scenario]\nkind = "impactor"\nname = "caf\xe9"\n')
+    err = refused(["run", str(path)], capsys, monkeypatch)
+    assert "not UTF-8 text" in err and "latin1.toml" in err
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("scenario = 5\n", "scenario: expected a table [scenario], got 5"),
+        ('paper = "x"\n[scenario]\nkind = "impactor"\n', "paper: expected a table [paper]"),
+        ('[scenario]\nkind = "impactor"\nseed = 4294967296\n', "scenario.seed: 4294967296"),
+        ('[scenario]\nkind = "impactor"\nruns = 0\n', "scenario.runs: 0"),
+    ],
+)
+def test_a_malformed_scenario_table_is_refused(tmp_path, capsys, monkeypatch, text, message):
+    path = tmp_path / "user.toml"
+    path.write_text(text)
+    assert message in refused(["run", str(path)], capsys, monkeypatch)
+
+
+def test_the_loader_and_run_accept_the_same_seeds(tmp_path):
+    top = 2**32 - 1
+    for seed, ok in ((top, True), (top + 1, False), (-1, False)):
+        path = tmp_path / "user.toml"
+        path.write_text(f'[scenario]\nkind = "impactor"\nseed = {seed}\n')
+        try:
+            gj.load_scenario(path)
+            loads = True
+        except ScenarioError:
+            loads = False
+        try:
+            cli._seed(str(seed))
+            parses = True
+        except Exception:
+            parses = False
+        assert loads == parses == ok, seed
+
+
+@pytest.mark.parametrize(
+    "setting, message",
+    [
+        ("approach.position_km=[1e200,0,0]", "approach.position_km: 1e+200 is out of range"),
+        ("approach.velocity_kmps=[1e-300,0,0]", "approach.velocity_kmps: speed 1e-300 km/s"),
+        ("approach.reference_normal=[0,0,1e-300]", "approach.reference_normal: [0.0, 0.0, 1e-300]"),
+        ("dynamics.sun_direction=[1e-300,0,0]", "dynamics.sun_direction: [1e-300, 0.0, 0.0]"),
+        ("dynamics.sun_distance_au=1e-300", "dynamics.sun_distance_au: 1e-300 AU"),
+        ("guidance.dt_s=0.0001", "guidance.dt_s: 0.0001 is out of range"),
+        ("approach.position_km=[1e9,0,0]", "approach.position_km: 1000000000.0 is out of range"),
+        ("spacecraft.mass_kg=1e-6", "spacecraft.propellant_kg: 25 kg is not less than"),
+        ("camera.image_interval_s=3600", "camera.image_interval_s: 3600 s leaves"),
+    ],
+)
+def test_impactor_inputs_outside_the_models_domain_are_refused(
+    setting, message, capsys, monkeypatch
+):
+    err = refused(["run", "deep-impact-los", "--runs", "2", "--set", setting], capsys, monkeypatch)
+    assert message in err
+    assert "allowed:" in err
+
+
+def test_a_slow_far_approach_is_refused_by_its_time_of_flight(capsys, monkeypatch):
+    argv = ["run", "deep-impact-los", "--set", "approach.position_km=[1e7,0,0]"]
+    argv += ["--set", "approach.velocity_kmps=[-1,0,0]"]
+    assert "time of flight 116 days" in refused(argv, capsys, monkeypatch)
+
+
+def test_predictive_schedule_conflicts_name_both_fields(capsys, monkeypatch):
+    base = ["run", "deep-impact-predictive", "--set"]
+    err = refused(base + ["guidance.cutoff_tgo_s=1000"], capsys, monkeypatch)
+    assert "the burn at 6450 s is not before the cut-off at 6200 s" in err
+    assert "guidance.cutoff_tgo_s" in err
+    err = refused(base + ["camera.image_interval_s=600"], capsys, monkeypatch)
+    assert err.startswith("gnc-jax: error: camera.image_interval_s: 600 s is longer than")
+    # The LOS law has no burn times: the same camera interval is fine for it.
+    gj.load_scenario("deep-impact-los", {"camera.image_interval_s": 600.0})
+
+
+# ---- runaway cost ---------------------------------------------------------------------------
+
+
+def test_a_billion_runs_are_refused_with_the_estimate(capsys, monkeypatch):
+    err = refused(["run", "deep-impact-los", "--runs", "1000000000"], capsys, monkeypatch)
+    assert "cost: 1000000000 runs x" in err and "days on" in err and "--max-hours" in err
+
+
+def test_the_cost_estimate_is_computed_from_the_scenario_alone():
+    scenario = gj.load_scenario("deep-impact-los")
+    one = gj.estimate_cost(scenario, runs=1000)
+    fine = gj.estimate_cost(scenario.with_overrides({"guidance.dt_s": 0.1}), runs=1000)
+    # 476 images of 15 s before the cut-off; ten times the control steps per image at 0.1 s
+    assert fine.steps_per_run - one.steps_per_run == pytest.approx(476 * (150 - 15))
+    sim, _ = gj.build(scenario)
+    assert one.steps_per_run >= sim.n_images * sim.steps_per_image
+    assert gj.estimate_cost(scenario, runs=2000).seconds == pytest.approx(2 * one.seconds)
+
+
+def test_a_chunk_too_large_for_memory_is_refused_before_it_runs(monkeypatch):
+    scenario = gj.load_scenario(TOY)
+    ran = []
+    real = montecarlo._check_memory
+    monkeypatch.setattr(montecarlo, "_check_memory", lambda c, n, f: (real(c, n, f), ran.append(n)))
+    with pytest.raises(
+        ScenarioError, match=r"chunk_size: 1000 runs need .* allowed: chunk_size <="
+    ):
+        gj.run_study(scenario, runs=1000, chunk_size=1000, max_memory_fraction=1e-9)
+    assert ran == []  # refused inside the check, before any chunk ran
+
+
+@pytest.mark.slow
+def test_ten_million_runs_in_one_chunk_are_refused_before_they_run(paper_scale):
+    # The case of the issue: `--chunk-size 10000000` tried to allocate 12 GB. Compiling it
+    # takes ~8 s; the refusal comes from the compiled program's own memory figures.
+    scenario = gj.load_scenario("deep-impact-los")
+    runs = 10_000_000 if paper_scale else 2_000_000
+    with pytest.raises(ScenarioError, match="chunk_size: .* GB"):
+        gj.run_study(
+            scenario,
+            runs=runs,
+            chunk_size=runs,
+            max_hours=1e5,
+            max_memory_fraction=0.5 * (1.0 if paper_scale else 0.1),
+        )
+
+
+# ---- honest outcomes ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("law", ["los", "pn", "predictive"])
+def test_a_zero_error_run_flies_the_nominal_trajectory_to_a_hit(law):
+    # The first thing many users try: every error source and the initial knowledge at zero.
+    # The run must be ok, fire once or twice for the retarget from (0, 0) to (1, 3) km, and
+    # hit the aim point; the Δv of the retarget is about |Δaim| / t_go at the burn.
+    base = gj.get_system("impactor").example
+    scenario = gj.load_scenario(
+        "deep-impact-predictive" if law == "predictive" else base,
+        {**ZERO_ERRORS, "guidance.law": law},
+    )
+    study = gj.run_study(scenario, runs=2, progress=False)
+    assert study.summary()["failed"] == 0, study.summary()["failed_by_status"]
+    o = study.outcomes
+    assert np.all(o["miss_m"] < 10.0), o["miss_m"]
+    assert np.all(o["firings"] <= 2)
+    aim_change = np.hypot(1e3, 3e3)
+    assert np.all(o["dv_mps"] < 2.0 * aim_change / 750.0), o["dv_mps"]
+
+
+def test_a_run_that_needs_more_propellant_than_it_carries_is_flagged():
+    scenario = gj.load_scenario(
+        "deep-impact-los",
+        {**gj.get_system("impactor").test_overrides, "spacecraft.propellant_kg": 0.05},
+    )
+    study = gj.run_study(scenario, runs=8, progress=False)
+    s = study.summary()
+    used = study.outcomes["fuel_kg"]
+    flagged = study.status == gj.Status.propellant
+    np.testing.assert_array_equal(flagged, used > 0.05)
+    assert flagged.any() and s["failed"] == flagged.sum()
+    assert s["failed_by_status"]["propellant"] == flagged.sum()
+
+
+# ---- exit codes -----------------------------------------------------------------------------
+
+
+def test_exit_code_follows_the_failed_fraction(tmp_path, capsys, monkeypatch):
+    system = gj.get_system("toy-intercept")
+    import jax.numpy as jnp
+
+    class HalfNaN(type(system)):
+        def simulate(self, params, law, key, record=False):
+            out, trace = super().simulate(params, law, key, record)
+            bad = jnp.asarray(out.miss_m).astype(jnp.int64) % 2 == 0  # about half the runs
+            return out._replace(miss_m=jnp.where(bad, jnp.nan, out.miss_m)), trace
+
+    monkeypatch.setattr(montecarlo, "get_system", lambda kind: HalfNaN())
+    argv = ["run", str(TOY), "--runs", "20", "--no-progress", "--out", str(tmp_path / "a")]
+    assert cli.main(argv) == cli.EXIT_FAILED_RUNS
+    err = capsys.readouterr().err
+    assert "runs failed" in err and "more than --max-failed 0.01" in err
+    assert (tmp_path / "a" / "summary.json").is_file()  # written before the exit code
+    summary = json.loads((tmp_path / "a" / "summary.json").read_text())
+    assert 0 < summary["failed"] < 20
+    assert cli.main(argv + ["--max-failed", "0.9"]) == 0
+
+
+# ---- report on damaged results --------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def toy_results(tmp_path_factory):
+    out = tmp_path_factory.mktemp("toy") / "study"
+    study = gj.run_study(gj.load_scenario(TOY), runs=20, progress=False)
+    study.save(out)
+    return out
+
+
+@pytest.mark.parametrize(
+    "damage, message",
+    [
+        (
+            lambda d: (d / "summary.json").write_text('{"scenario": "x", "ru'),
+            "summary.json: not valid JSON",
+        ),
+        (
+            lambda d: (d / "summary.json").write_text("[1, 2]"),
+            "summary.json: not a gnc_jax summary",
+        ),
+        (
+            lambda d: (d / "runs.parquet").write_bytes((d / "runs.parquet").read_bytes()[:300]),
+            "runs.parquet: not a readable Parquet file",
+        ),
+        (lambda d: (d / "scenario.toml").write_text("kind = ["), "scenario.toml: scenario"),
+        (lambda d: (d / "runs.parquet").unlink(), "runs.parquet: missing"),
+    ],
+)
+def test_report_on_a_damaged_directory_names_the_file(
+    toy_results, tmp_path, capsys, damage, message
+):
+    d = tmp_path / "copy"
+    shutil.copytree(toy_results, d)
+    damage(d)
+    assert cli.main(["report", str(d)]) == cli.EXIT_REFUSED
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err, err
+
+
+def test_report_on_a_partial_runs_file_says_so(toy_results, tmp_path, capsys):
+    import pyarrow.parquet as pq
+
+    d = tmp_path / "copy"
+    shutil.copytree(toy_results, d)
+    table = pq.read_table(d / "runs.parquet")
+    pq.write_table(table.slice(0, 5), d / "runs.parquet")
+    assert cli.main(["report", str(d)]) == cli.EXIT_REFUSED
+    assert "5 rows, but summary.json says 20 runs" in capsys.readouterr().err
+
+
+# ---- a bug is one line too ------------------------------------------------------------------
+
+
+def test_an_internal_error_is_one_line_with_a_way_to_the_traceback(capsys, monkeypatch):
+    def broken(*args, **kwargs):
+        raise RuntimeError("boom\nsecond line")
+
+    monkeypatch.setattr(montecarlo, "run_study", broken)
+    monkeypatch.delenv(cli.DEBUG_ENV, raising=False)
+    assert cli.main(["run", "deep-impact-los", "--runs", "2"]) == cli.EXIT_INTERNAL
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "internal error: RuntimeError: boom" in err and cli.DEBUG_ENV in err
+    monkeypatch.setenv(cli.DEBUG_ENV, "1")
+    with pytest.raises(RuntimeError):
+        cli.main(["run", "deep-impact-los", "--runs", "2"])
