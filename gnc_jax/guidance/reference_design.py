@@ -21,6 +21,7 @@ partials of seed 003 eqs. 10 and 16).
 import hashlib
 import importlib.resources
 import json
+import math
 import os
 import pathlib
 from typing import NamedTuple
@@ -36,6 +37,7 @@ from ..dynamics.entry import EntryState
 from ..geometry.sphere import along_cross_track, to_earth_fixed, unit
 from ..integrate import rk4_step
 from ..root_finding import bounded_regula_falsi
+from ..scenario.schema import ScenarioError
 from .entry_common import (
     EntryModel,
     drag_load_g,
@@ -49,6 +51,18 @@ from .skip_entry import ReferenceTrajectory
 
 #: bump when the design procedure changes, so that cached references are redesigned
 REFERENCE_VERSION = 3
+
+# The first-entry bank search of the design (solve_first_entry_bank): bounds, bracketing step
+# and steps (eq. 15), the first guess, and the second-entry profile the design starts from.
+SIGMA_1_BOUNDS_RAD = (math.radians(40.0), math.radians(140.0))
+SIGMA_1_STEP_RAD = math.radians(2.0)
+SIGMA_1_BRACKET_STEPS = 12
+SIGMA_1_GUESS_RAD = 1.2915  # 74 deg
+PROFILE_INIT_RAD = (1.0472, 1.0472)  # 60 deg
+PROFILE_BOUNDS_RAD = (math.radians(5.0), math.radians(175.0))  # of (sigma_a, sigma_b)
+V_SWITCH_INIT_MPS = 7300.0
+RANGE_TOLERANCE_M = 1.0  # of the first-entry bank solve
+DESIGN_MISS_LIMIT_M = 1.0e3  # a designed nominal farther from the target did not converge
 
 
 class NominalProblem(eqx.Module):
@@ -166,16 +180,205 @@ def solve_first_entry_bank(problem: NominalProblem, sigma_a, sigma_b, v_switch, 
         res = bounded_regula_falsi(
             f,
             x0,
-            jnp.radians(2.0),
-            jnp.radians(40.0),
-            jnp.radians(140.0),
-            1.0,
-            n_bracket=12,
+            SIGMA_1_STEP_RAD,
+            *SIGMA_1_BOUNDS_RAD,
+            RANGE_TOLERANCE_M,
+            n_bracket=SIGMA_1_BRACKET_STEPS,
             n_iter=16,
         )
         return res.x
 
     return jax.lax.custom_root(residual, guess, solve, lambda g, y: y / g(1.0))
+
+
+# ---- what the design can reach, checked before it runs ----
+SKIP_LANDS, LANDS_WITHOUT_SKIP, NEVER_LANDS = 0, 1, 2  # fates of a nominal flight
+
+
+def _fate(flight: _Flight) -> Array:
+    """``SKIP_LANDS`` when the nominal skips (a switch point before the chute) and then reaches
+    the chute altitude, the only flight the design and the law can use; ``LANDS_WITHOUT_SKIP``
+    for a direct entry; ``NEVER_LANDS`` when it skips out or lands beyond the design horizon."""
+    skip = (flight.phase == 2) & (flight.t_switch < flight.t_chute)
+    return jnp.where(
+        flight.done & skip, SKIP_LANDS, jnp.where(flight.done, LANDS_WITHOUT_SKIP, NEVER_LANDS)
+    )
+
+
+def candidate_banks(guess=SIGMA_1_GUESS_RAD) -> np.ndarray:
+    """The first-entry banks the design's solve can try: steps of ``SIGMA_1_STEP_RAD`` from
+    ``guess`` (eq. 15) over the whole of ``SIGMA_1_BOUNDS_RAD``, since the warm start of each
+    design step is the previous solution and may drift to either bound."""
+    lo, hi = SIGMA_1_BOUNDS_RAD
+    k = np.arange(
+        np.floor((lo - guess) / SIGMA_1_STEP_RAD), np.ceil((hi - guess) / SIGMA_1_STEP_RAD) + 1
+    )
+    return np.unique(np.clip(guess + SIGMA_1_STEP_RAD * k, lo, hi))
+
+
+@jax.jit
+def _candidate_flights(problem: NominalProblem, banks, profile_banks):
+    """Along-track chute error (m) and fate of the nominal flown with each first-entry bank of
+    ``banks`` and each constant second-entry bank of ``profile_banks`` (shape: banks x
+    profile banks)."""
+
+    def one(sigma_1, sigma_2):
+        flight = fly_nominal(problem, sigma_1, sigma_2, sigma_2, V_SWITCH_INIT_MPS)
+        return range_error_m(problem, flight), _fate(flight)
+
+    return jax.vmap(lambda s1: jax.vmap(lambda s2: one(s1, s2))(profile_banks))(banks)
+
+
+@jax.jit
+def _boundary_errors(problem: NominalProblem, banks, profile_banks, fate):
+    """Along-track chute error (m) where the nominal stops skipping and landing, between
+    neighbouring ``banks`` whose ``fate`` (from :func:`_candidate_flights`) differs in
+    whether they skip and land (bisection to 2e-9 of the bank step; 0 elsewhere).
+
+    The chute range is continuous in the first-entry bank up to such a boundary (the skip
+    flattens into a direct entry, or the Kepler arc lengthens beyond the design horizon), so
+    the ranges at the boundaries are the ends of what the design's solve can bracket."""
+    lands = fate == SKIP_LANDS
+
+    def lands_with(sigma_1, sigma_2):
+        flight = fly_nominal(problem, sigma_1, sigma_2, sigma_2, V_SWITCH_INIT_MPS)
+        return _fate(flight) == SKIP_LANDS
+
+    def edge(a, b, a_lands, sigma_2):
+        def bisect(_, ends):
+            inside, outside = ends
+            mid = 0.5 * (inside + outside)
+            m = lands_with(mid, sigma_2)
+            return jnp.where(m, mid, inside), jnp.where(m, outside, mid)
+
+        ends = (jnp.where(a_lands, a, b), jnp.where(a_lands, b, a))
+        inside, _ = jax.lax.fori_loop(0, 30, bisect, ends)
+        flight = fly_nominal(problem, inside, sigma_2, sigma_2, V_SWITCH_INIT_MPS)
+        return range_error_m(problem, flight)
+
+    def column(j):
+        return jax.vmap(lambda a, b, la: edge(a, b, la, profile_banks[j]))(
+            banks[:-1], banks[1:], lands[:-1, j]
+        )
+
+    errors = jax.vmap(column)(jnp.arange(profile_banks.shape[0])).T
+    return jnp.where(lands[:-1] != lands[1:], errors, 0.0), lands[:-1] != lands[1:]
+
+
+def _profile_banks() -> np.ndarray:
+    """Constant second-entry banks spanning what the design may fly: its bounds and start."""
+    return np.array([PROFILE_BOUNDS_RAD[0], PROFILE_INIT_RAD[0], PROFILE_BOUNDS_RAD[1]])
+
+
+@jax.jit
+def _skips_and_lands(problem: NominalProblem, d_fpa, banks, profile_banks):
+    """Whether some pair of ``banks`` x ``profile_banks`` skips and lands when the entry
+    flight-path angle is shifted by each of ``d_fpa`` (rad)."""
+    earth = problem.model.earth
+
+    def shifted(d):
+        entry = perturb_switch_state(problem.entry, earth, 0.0, d, 0.0)
+        return _candidate_flights(
+            eqx.tree_at(lambda p: p.entry, problem, entry), banks, profile_banks
+        )
+
+    return jax.vmap(lambda d: jnp.any(shifted(d)[1] == SKIP_LANDS))(d_fpa)
+
+
+def _corridor(problem: NominalProblem, entry: dict, banks) -> str:
+    """The entry flight-path angles (deg, 0.1 deg grid over the declared range) for which some
+    candidate skips and lands, at this entry speed and vehicle."""
+    from ..scenario.capsule import SCHEMA  # the declared range
+
+    field = SCHEMA["entry"]["fpa_deg"]
+    grid = np.round(np.arange(field.lo, field.hi + 1e-9, 0.1), 1)
+    d_fpa = np.radians(grid - entry["fpa_deg"])
+    ok = np.asarray(
+        _skips_and_lands(problem, jnp.asarray(d_fpa), jnp.asarray(banks), _profile_banks())
+    )
+    if not ok.any():
+        return "none at this speed and vehicle (change entry.speed_kmps or vehicle.cl/cd)"
+    return f"{grid[ok].max():.1f} .. {grid[ok].min():.1f} deg at this speed and vehicle"
+
+
+def _conditions(entry: dict, vehicle: dict) -> str:
+    return (
+        f"entry.speed_kmps = {entry['speed_kmps']:g}, entry.fpa_deg = {entry['fpa_deg']:g}, "
+        f"L/D = vehicle.cl/vehicle.cd = {vehicle['cl'] / vehicle['cd']:.3g}"
+    )
+
+
+def require_reachable(problem: NominalProblem, entry: dict, vehicle: dict, guess=None):
+    """Refuse, before the design runs, a scenario whose target the design cannot reach.
+
+    The design puts the chute on the target by solving for the first-entry bank, starting
+    from ``guess`` and bracketing in steps of ``SIGMA_1_STEP_RAD`` (eq. 15). This flies the
+    nominal with each of those candidate banks and the design's initial second-entry profile
+    (one vmapped, jitted flight, a few seconds) and raises :class:`ScenarioError`:
+
+    * naming ``entry.fpa_deg`` (with the corridor of angles that work at this speed and L/D)
+      when no candidate skips and lands: the law needs a skip (seed 003 Fig. 1);
+    * naming ``entry.range_km`` (with the reachable interval) when the target lies outside
+      the chute ranges of the candidates that skip and land: no bank brackets the target.
+
+    ``entry`` and ``vehicle`` are the scenario sections (file units) the messages quote.
+    """
+    banks = candidate_banks(SIGMA_1_GUESS_RAD if guess is None else guess)
+    flights = _candidate_flights(problem, jnp.asarray(banks), jnp.asarray(_profile_banks()))
+    err_m, fate = (np.asarray(x) for x in flights)
+    span = (
+        f"first-entry banks {np.degrees(banks.min()):.0f}..{np.degrees(banks.max()):.0f} deg "
+        f"and second-entry banks {np.degrees(PROFILE_BOUNDS_RAD[0]):.0f}.."
+        f"{np.degrees(PROFILE_BOUNDS_RAD[1]):.0f} deg"
+    )
+    lands = fate == SKIP_LANDS
+    if not lands.any():
+        if (fate == NEVER_LANDS).all():
+            what = "skips out (never reaches the chute altitude)"
+        elif (fate == LANDS_WITHOUT_SKIP).all():
+            what = "lands without a skip"
+        else:
+            what = "never both skips and lands"
+        raise ScenarioError(
+            f"entry.fpa_deg: {entry['fpa_deg']:g} deg; the nominal flight {what} with all "
+            f"{span} ({_conditions(entry, vehicle)}); allowed: "
+            f"{_corridor(problem, entry, banks)}"
+        )
+    edge_m, edge = (
+        np.asarray(x)
+        for x in _boundary_errors(
+            problem, jnp.asarray(banks), jnp.asarray(_profile_banks()), jnp.asarray(fate)
+        )
+    )
+    reach_km = entry["range_km"] + np.concatenate([err_m[lands], edge_m[edge]]) / 1e3
+    lo, hi = float(reach_km.min()), float(reach_km.max())
+    if not lo <= entry["range_km"] <= hi:
+        raise ScenarioError(
+            f"entry.range_km: {entry['range_km']:g} km; allowed: {lo:.0f} .. {hi:.0f} km, the "
+            f"chute ranges of the reference design's nominal skip with {span} "
+            f"({_conditions(entry, vehicle)})"
+        )
+    return lo, hi
+
+
+def require_design(problem: NominalProblem, d: "DesignResult", entry: dict, vehicle: dict):
+    """Refuse (:class:`ScenarioError`, naming ``entry.range_km``) a finished design whose
+    nominal does not skip and put the chute on the target: its solve did not converge."""
+    flight = fly_nominal(problem, d.sigma_1, d.sigma_a, d.sigma_b, d.v_switch)
+    err_m = float(range_error_m(problem, flight))
+    fate = int(_fate(flight))
+    if fate != SKIP_LANDS or not abs(err_m) <= DESIGN_MISS_LIMIT_M:
+        how = {
+            SKIP_LANDS: f"its chute point is {err_m / 1e3:.3g} km from the target",
+            LANDS_WITHOUT_SKIP: "its nominal lands without a skip",
+            NEVER_LANDS: "its nominal never reaches the chute altitude",
+        }[fate]
+        raise ScenarioError(
+            f"entry.range_km: {entry['range_km']:g} km; the reference design did not converge "
+            f"({how}; {_conditions(entry, vehicle)}); allowed: a range the design reaches "
+            f"(nearer the middle of its reachable interval), or other reference.w_margin / "
+            f"reference.design_steps"
+        )
 
 
 class DesignResult(NamedTuple):
@@ -191,11 +394,11 @@ def design(
     w_margin=2.0,
     steps=20,
     learning_rate=0.05,
-    init=(1.0472, 1.0472),  # 60 deg
-    sigma_1_guess=1.2915,  # 74 deg
+    init=PROFILE_INIT_RAD,
+    sigma_1_guess=SIGMA_1_GUESS_RAD,
 ):
     """Optimise (sigma_a, sigma_b); returns the design (radians) and the objective history."""
-    v_switch = jnp.asarray(7300.0)
+    v_switch = jnp.asarray(V_SWITCH_INIT_MPS)
 
     @jax.jit
     def objective(theta, v_switch, guess):
@@ -218,7 +421,7 @@ def design(
         (value, (s1, vs)), g = grad(theta, v_switch, guess)
         history.append(float(value))
         updates, state = opt.update(g, state)
-        theta = jnp.clip(optax.apply_updates(theta, updates), np.radians(5), np.radians(175))
+        theta = jnp.clip(optax.apply_updates(theta, updates), *PROFILE_BOUNDS_RAD)
         # anchor the profile at the switch speed the design actually produces
         v_switch, guess = vs, s1
     s1 = solve_first_entry_bank(problem, theta[0], theta[1], v_switch, guess)
@@ -383,6 +586,11 @@ def tabulate_reference(
     # keep the part where speed decreases monotonically (the table's abscissa)
     keep = np.concatenate([[True], np.diff(speed[:n]) < 0])
     last = int(np.argmin(keep)) if not keep.all() else n
+    if last < 3:  # a table needs points; require_design makes this unreachable in practice
+        raise ScenarioError(
+            f"entry: the designed second entry has {last} tabulable points above the chute "
+            "altitude; allowed: an entry whose nominal skips and then descends to the chute"
+        )
     grid = np.linspace(speed[0], speed[last - 1], n_grid)
     order = np.argsort(speed[:last])
 
@@ -441,8 +649,12 @@ def reference_for(problem: NominalProblem, description: dict, **design_kwargs):
 
     ``description`` (JSON-serialisable) identifies the problem; its hash names the cache file
     (``reference-<hash>.npz`` in :func:`cache_dir`, then the packaged copy shipped with
-    gnc_jax). A cache miss runs :func:`design` and :func:`tabulate_reference` (about a minute)
-    and saves the result. Returns ``(ReferenceTrajectory, DesignResult-like dict)``.
+    gnc_jax). It holds the scenario's ``entry`` and ``vehicle`` sections, which the refusals
+    quote. A cache miss first refuses a target the design cannot reach
+    (:func:`require_reachable`, a few seconds), then runs :func:`design` (about a minute),
+    refuses a design that did not converge (:func:`require_design`), tabulates the reference
+    (:func:`tabulate_reference`, about 20 s) and saves it. Returns
+    ``(ReferenceTrajectory, DesignResult-like dict)``.
     """
     blob = json.dumps(
         {"problem": description, "design": design_kwargs, "version": REFERENCE_VERSION},
@@ -459,7 +671,10 @@ def reference_for(problem: NominalProblem, description: dict, **design_kwargs):
         with source.open("rb") as fh:
             data = dict(np.load(fh))
     else:
+        entry, vehicle = description["entry"], description["vehicle"]
+        require_reachable(problem, entry, vehicle, design_kwargs.get("sigma_1_guess"))
         d = design(problem, **design_kwargs)
+        require_design(problem, d, entry, vehicle)
         ref = tabulate_reference(problem, d)
         data = {f: np.asarray(getattr(ref, f)) for f in ReferenceTrajectory.__dataclass_fields__}
         data["objective_history"] = np.asarray(d.objective_history)

@@ -373,6 +373,13 @@ class SkipEntryGuidance(AbstractEntryGuidance):
             raise ScenarioError(
                 "guidance.skip_entry.bank_min_deg: must be < guidance.skip_entry.bank_max_deg"
             )
+        altitude = config["entry"]["altitude_km"]
+        if section["skip_out_altitude_km"] <= altitude:
+            # the flight would count as a skip-out from its first step
+            raise ScenarioError(
+                f"guidance.skip_entry.skip_out_altitude_km: {section['skip_out_altitude_km']:g}"
+                f" km; allowed: above entry.altitude_km = {altitude:g} km"
+            )
 
     @classmethod
     def from_config(cls, section, config, ctx=None):

@@ -9,11 +9,35 @@ F = Field
 
 SCHEMA = {
     "entry": {
-        "altitude_km": F("float", 120.0, lo=50.0, hi=500.0, units="km"),
-        "speed_kmps": F(
-            "float", 11.0, lo=5.0, hi=20.0, units="km/s", doc="Earth-relative entry speed"
+        "altitude_km": F(
+            "float",
+            120.0,
+            lo=100.0,
+            hi=200.0,
+            units="km",
+            doc="entry interface; below 100 km the hold phase has no air-free start, above "
+            "200 km the 1800 s horizon of the reference design is spent coasting",
         ),
-        "fpa_deg": F("float", -5.9, lo=-30.0, hi=0.0, units="deg", doc="Earth-relative"),
+        "speed_kmps": F(
+            "float",
+            11.0,
+            lo=8.0,
+            hi=16.0,
+            units="km/s",
+            doc="Earth-relative entry speed; the design anchors the switch point at 7.3 km/s, so "
+            "a skip needs more; which speeds reach the target is checked before the design",
+        ),
+        "fpa_deg": F(
+            "float",
+            -5.9,
+            lo=-12.0,
+            hi=-2.0,
+            units="deg",
+            doc="Earth-relative; steeper than -12 deg the load pulse lasts under three 2 s "
+            "steps of the design and a 'pull-up' happens only near the ground, which the phase "
+            "logic cannot tell from a skip; shallower than -2 deg nothing is captured; the "
+            "corridor of this speed and vehicle is checked before the design",
+        ),
         "azimuth_deg": F(
             "float", 34.3, lo=-360.0, hi=360.0, units="deg", doc="heading, clockwise from north"
         ),
@@ -23,9 +47,11 @@ SCHEMA = {
             "float",
             8000.0,
             lo=500.0,
-            hi=20000.0,
+            hi=15000.0,
             units="km",
-            doc="great-circle range from the entry point to the target",
+            doc="great-circle range from the entry point to the target, short of the antipode "
+            "(20015 km) where the along-track error is undefined; the range this entry and "
+            "vehicle can reach is checked before the design",
         ),
         "chute_altitude_km": F("float", 10.0, lo=1.0, hi=40.0, units="km"),
     },
@@ -94,6 +120,17 @@ SCHEMA = {
             "float", 1.0, lo=0.01, hi=10.0, units="s", doc="guidance step; a multiple of dt_s"
         ),
         "max_time_s": F("float", 2400.0, lo=10.0, hi=1e5, units="s"),
+        "miss_limit_km": F(
+            "float",
+            100.0,
+            lo=0.0,
+            lo_open=True,
+            hi=1000.0,
+            units="km",
+            doc="a run whose chute point misses the target by more (downrange or crossrange) "
+            "lost the target: status out_of_domain, left out of the statistics (the paper's "
+            "requirement is 2.5 km)",
+        ),
     },
 }
 

@@ -197,6 +197,7 @@ class CapsuleSimulation(eqx.Module):
     ratio_filter_gain: Scalar  # per control step, for the measured drag/lift ratios
     hold_bank_rad: Scalar  # attitude held before guidance starts
     chute_altitude_m: Scalar  # the chute deploys (the flight ends) below it
+    miss_limit_m: Scalar  # a larger downrange or crossrange miss: status out_of_domain
     dt_s: float = eqx.field(static=True, default=0.5)
     substeps: int = eqx.field(static=True, default=2)  # truth steps per control step
     n_control: int = eqx.field(static=True, default=2400)
@@ -433,7 +434,12 @@ def simulate(sim: CapsuleSimulation, law: AbstractEntryGuidance, key: PRNGKeyArr
 
 
 def _outcome(sim: CapsuleSimulation, c: _Carry, draws) -> CapsuleOutcome:
-    """Chute-point errors against the nominal entry -> target track, loads, the law's log."""
+    """Chute-point errors against the nominal entry -> target track, loads, the law's log.
+
+    Status, by precedence: ``skip_out`` (climbed above the law's skip-out altitude),
+    ``time_out`` (no chute crossing within ``max_time_s``), ``no_convergence`` (the last
+    corrector cycle failed), ``out_of_domain`` (a downrange or crossrange miss beyond
+    ``miss_limit_m``: the guidance lost the target), else ``ok``."""
     earth, f, g = sim.earth, c.flight, c.guidance
     log = g.log
     nominal_start = unit(entry_state_from_conditions(sim.entry, earth).r)
@@ -471,6 +477,10 @@ def _outcome(sim: CapsuleSimulation, c: _Carry, draws) -> CapsuleOutcome:
             (log.skipped_out, Status.skip_out),
             (~f.done, Status.time_out),
             (g.last_status != RootStatus.ok, Status.no_convergence),
+            (
+                jnp.maximum(jnp.abs(along), jnp.abs(cross)) * r_e_km * 1e3 > sim.miss_limit_m,
+                Status.out_of_domain,
+            ),
         ),
     )
 
@@ -534,6 +544,7 @@ def build(scenario) -> CapsuleSimulation:
         ratio_filter_gain=_f64(g["ratio_filter_gain"]),
         hold_bank_rad=_f64(rad(g["hold_bank_deg"])),
         chute_altitude_m=_f64(e["chute_altitude_km"] * 1e3),
+        miss_limit_m=_f64(s["miss_limit_km"] * 1e3),
         dt_s=float(s["dt_s"]),
         substeps=int(round(s["control_dt_s"] / s["dt_s"])),
         n_control=int(math.ceil(s["max_time_s"] / s["control_dt_s"])),

@@ -5,6 +5,7 @@ Truth, actuator and sensors are in :mod:`gnc_jax.simulation.capsule`; the law in
 :mod:`gnc_jax.guidance.skip_entry`; the scenario sections in :mod:`gnc_jax.scenario.capsule`.
 """
 
+import math
 import pathlib
 from typing import Any, ClassVar
 
@@ -18,6 +19,13 @@ from ..plotting import ellipse_xy, pyplot, saver
 from ..scenario import capsule as capsule_scenario
 from ..simulation import capsule as capsule_sim
 from .base import AbstractSystem, register_system
+
+# Cost model of CapsuleSystem.steps_per_run: trajectory fractions of the paper scenario.
+MEAN_SPEED_FRACTION = 0.58  # chute range / (flight time x entry speed): 8000 km in 1250 s at 11
+FIRST_ENTRY_FRACTION = 0.16  # corrector-active first entry over the flight: (229 - 34) / 1250 s
+HORIZON_FRACTION = 0.56  # mean time to the switch point from a corrector cycle over the flight
+PREDICTIONS_PER_CYCLE = 4.3  # mean predictions per corrector cycle (209 over 49 cycles)
+STEP_SECONDS = 2.7e-6  # s per step and device: paper scenario, 256 runs in 8.3 s on 2 devices
 
 
 def _interval(x: np.ndarray) -> dict[str, Any]:
@@ -232,8 +240,38 @@ class CapsuleSystem(AbstractSystem):
     example = "lunar-skip-entry"
     test_overrides: ClassVar[dict[str, Any]] = {}
 
+    # measured with benchmarks/capsule_cost.py (wall s x devices / runs / steps)
+    step_seconds = STEP_SECONDS
+
     def check(self, config):
         capsule_scenario.check(config)
+
+    def steps_per_run(self, config):
+        """Truth RK4 steps plus the predictor's RK4 steps (one truth-step equivalent each:
+        both are an RK4 step of an entry vector field), estimated from the scenario alone.
+
+        The truth scan always runs ``max_time_s / dt_s`` steps (a finished flight is masked,
+        not stopped). Each corrector cycle of the first entry makes about
+        ``PREDICTIONS_PER_CYCLE`` predictions (at most ``1 + n_bracket + n_iter``), each
+        integrating from now to the switch point at ``predictor_dt_s``. The flight lasts about
+        ``range / (MEAN_SPEED_FRACTION * entry speed)``; the first entry (the corrector's
+        cycles) about ``FIRST_ENTRY_FRACTION`` of it; a prediction reaches about
+        ``HORIZON_FRACTION`` of it ahead. The fractions are those of the paper scenario
+        (256 runs: flight 1250 s, guidance 34-229 s, switch at 827 s, 4.3 predictions per
+        cycle); the estimate is within about x3 on the off-nominal cases of
+        ``benchmarks/capsule_cost.py``.
+        """
+        e, s, g = config["entry"], config["simulation"], config["guidance"]
+        law = g.get(g.get("law", self.default_law), {})
+        truth = math.ceil(s["max_time_s"] / s["control_dt_s"]) * round(
+            s["control_dt_s"] / s["dt_s"]
+        )
+        flight_s = min(s["max_time_s"], e["range_km"] / (MEAN_SPEED_FRACTION * e["speed_kmps"]))
+        dt = law.get("predictor_dt_s", 8.0)
+        horizon = min(HORIZON_FRACTION * flight_s / dt, law.get("predictor_max_steps", 1000))
+        slots = 1 + law.get("n_bracket", 6) + law.get("n_iter", 6)
+        cycles = FIRST_ENTRY_FRACTION * flight_s / g["pc_period_s"]
+        return float(truth + cycles * min(PREDICTIONS_PER_CYCLE, slots) * horizon)
 
     def build(self, scenario):
         sim = capsule_sim.build(scenario)

@@ -1,0 +1,199 @@
+"""Reliability of the capsule system (issue #13): inputs the models cannot handle are refused in
+one line before the reference design, and degraded runs are statuses, never ``ok``."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import gnc_jax as gj
+from gnc_jax._status import Status
+from gnc_jax.dynamics.entry import entry_state_from_conditions
+from gnc_jax.guidance import reference_design as rd
+from gnc_jax.guidance.entry_common import EntryModel
+from gnc_jax.simulation import capsule as capsule_sim
+
+
+@pytest.fixture(scope="module")
+def paper():
+    return gj.load_scenario("lunar-skip-entry")
+
+
+def _problem(scenario) -> rd.NominalProblem:
+    """The design problem of a scenario, built the way the law builds it."""
+    cfg = scenario.config
+    earth, vehicle, atmosphere, entry = capsule_sim._nominal(cfg)
+    return rd.NominalProblem(
+        model=EntryModel(vehicle, earth, atmosphere),
+        entry=entry_state_from_conditions(entry, earth),
+        target_fixed=capsule_sim._target(cfg, earth, entry),
+        kepler_load_g=jnp.asarray(cfg["guidance"]["skip_entry"]["kepler_load_g"]),
+        chute_altitude_m=jnp.asarray(cfg["entry"]["chute_altitude_km"] * 1e3),
+        v_end_mps=jnp.asarray(cfg["reference"]["v_end_mps"]),
+    )
+
+
+def _one_line(e) -> str:
+    text = str(e.value)
+    assert "\n" not in text
+    return text
+
+
+@pytest.fixture
+def no_design(monkeypatch, tmp_path):
+    """An empty reference cache, and a design that fails the test if it is reached."""
+    monkeypatch.setenv("GNC_JAX_CACHE", str(tmp_path))
+    monkeypatch.setattr(rd, "_MEMORY", {})
+
+    def design(*args, **kwargs):
+        raise AssertionError("the reference design ran for an input that must be refused")
+
+    monkeypatch.setattr(rd, "design", design)
+
+
+@pytest.mark.parametrize(
+    "override, field",
+    [("entry.fpa_deg=-30", "entry.fpa_deg"), ("entry.range_km=20000", "entry.range_km")],
+)
+def test_inputs_outside_the_declared_domain_are_refused_on_load(paper, override, field):
+    with pytest.raises(gj.ScenarioError) as e:
+        paper.with_overrides([override])
+    assert _one_line(e).startswith(f"{field}: ")
+    assert "allowed" in str(e.value)
+
+
+def test_entry_above_the_skip_out_altitude_is_refused(paper):
+    with pytest.raises(gj.ScenarioError) as e:
+        paper.with_overrides(
+            ["entry.altitude_km=150", "guidance.skip_entry.skip_out_altitude_km=140"]
+        )
+    assert _one_line(e).startswith("guidance.skip_entry.skip_out_altitude_km: 140 km")
+
+
+def _landed_ranges_km(problem, range_km, sigma_1_deg, sigma_2_deg):
+    """Brute force: chute range (km, along the entry -> target track) of every nominal on a
+    grid of constant first- and second-entry banks that skips and lands (NaN otherwise)."""
+
+    @jax.jit
+    def fly(s1, s2):
+        f = rd.fly_nominal(problem, s1, s2, s2, rd.V_SWITCH_INIT_MPS)
+        skipped = (f.phase == 2) & (f.t_switch < f.t_chute) & f.done
+        return jnp.where(skipped, range_km + rd.range_error_m(problem, f) / 1e3, jnp.nan)
+
+    s1, s2 = np.meshgrid(np.radians(sigma_1_deg), np.radians(sigma_2_deg), indexing="ij")
+    return np.asarray(jax.vmap(fly)(jnp.asarray(s1.ravel()), jnp.asarray(s2.ravel())))
+
+
+def test_unreachable_range_is_refused_before_the_design_with_the_reachable_interval(
+    paper, no_design
+):
+    scenario = paper.with_overrides(["entry.range_km=14000"])
+    with pytest.raises(gj.ScenarioError) as e:
+        gj.build(scenario)
+    text = _one_line(e)
+    assert text.startswith("entry.range_km: 14000 km; allowed: ")
+    lo, hi = (float(x) for x in text.split("allowed: ")[1].split(" km")[0].split(" .. "))
+    # a brute-force grid of the design's banks (0.5 deg first entry) lands inside the quoted
+    # interval and never near the refused range
+    landed = _landed_ranges_km(
+        _problem(scenario), 14000.0, np.arange(40.0, 140.01, 0.5), [5.0, 60.0, 175.0]
+    )
+    landed = landed[np.isfinite(landed)]
+    assert landed.size > 0
+    assert landed.min() >= lo - 1.0 and landed.max() <= hi + 1.0
+    assert landed.max() > 0.5 * hi  # the interval is not a loose bound
+    assert hi < 14000.0
+
+
+def test_uncaptured_entry_angle_is_refused_before_the_design_with_the_corridor(paper, no_design):
+    scenario = paper.with_overrides(["entry.fpa_deg=-4.5"])
+    with pytest.raises(gj.ScenarioError) as e:
+        gj.build(scenario)
+    text = _one_line(e)
+    assert text.startswith("entry.fpa_deg: -4.5 deg; the nominal flight skips out")
+    shallow, steep = (float(x) for x in text.split("allowed: ")[1].split(" deg")[0].split(" .. "))
+    assert steep < shallow < -4.5
+    landed = _landed_ranges_km(
+        _problem(scenario), 8000.0, np.arange(40.0, 140.01, 2.0), [5.0, 60.0, 175.0]
+    )
+    assert not np.isfinite(landed).any()  # brute force: nothing skips and lands
+    # and the shallow end of the quoted corridor does
+    inside = paper.with_overrides([f"entry.fpa_deg={shallow}"])
+    landed = _landed_ranges_km(
+        _problem(inside), 8000.0, np.arange(40.0, 140.01, 2.0), [5.0, 60.0, 175.0]
+    )
+    assert np.isfinite(landed).any()
+
+
+def test_a_design_that_misses_the_target_is_refused(paper):
+    problem = _problem(paper)
+    # a design whose first-entry bank is not the root: its nominal lands far from the target
+    wrong = rd.DesignResult(math.radians(80.0), 1.0472, 1.0472, 7300.0, [])
+    flight = rd.fly_nominal(problem, wrong.sigma_1, wrong.sigma_a, wrong.sigma_b, wrong.v_switch)
+    assert abs(float(rd.range_error_m(problem, flight))) > 1e5
+    with pytest.raises(gj.ScenarioError) as e:
+        rd.require_design(problem, wrong, paper.config["entry"], paper.config["vehicle"])
+    assert _one_line(e).startswith("entry.range_km: 8000 km; the reference design did not")
+
+
+def _miss_km(o):
+    return np.maximum(np.abs(o["downrange_err_km"]), np.abs(o["crossrange_err_km"]))
+
+
+def test_a_miss_beyond_the_limit_is_out_of_domain_and_left_out_of_the_statistics(paper):
+    study = gj.run_study(paper, runs=4, progress=False)
+    assert (study.status == Status.ok).all()
+    miss = _miss_km(study.outcomes)
+    limit = float(np.median(miss))  # half of the runs miss by more
+    tight = gj.run_study(
+        paper.with_overrides([f"simulation.miss_limit_km={limit}"]), runs=4, progress=False
+    )
+    np.testing.assert_array_equal(
+        tight.outcomes["downrange_err_km"], study.outcomes["downrange_err_km"]
+    )
+    expected = np.where(miss > limit, Status.out_of_domain, Status.ok)
+    np.testing.assert_array_equal(tight.status, expected)
+    s = tight.summary()
+    assert s["failed"] == int((miss > limit).sum()) > 0
+    ok = miss <= limit
+    np.testing.assert_allclose(
+        s["downrange_err_km"]["mean"], np.mean(study.outcomes["downrange_err_km"][ok])
+    )
+    # the cost model's predictor term against the predictor steps the runs logged
+    system = paper.system
+    cfg = paper.config
+    sim, _ = gj.build(paper)
+    truth = sim.n_control * sim.substeps
+    predicted = system.steps_per_run(cfg) - truth
+    logged = float(np.mean(study.outcomes["predictor_steps"]))
+    assert predicted == pytest.approx(logged, rel=2.0)  # within x3
+
+
+@pytest.mark.parametrize(
+    "overrides, status",
+    [
+        # lift held up for the whole flight (guidance never starts): skips out of the atmosphere
+        (
+            ["guidance.hold_bank_deg=0", "guidance.skip_entry.ng0_g=5"],
+            Status.skip_out,
+        ),
+        # a corrector that cannot reach its 1 m tolerance in 3 predictions
+        (
+            [
+                "guidance.skip_entry.n_bracket=1",
+                "guidance.skip_entry.n_iter=1",
+                "guidance.skip_entry.range_tolerance_km=0.001",
+            ],
+            Status.no_convergence,
+        ),
+    ],
+)
+def test_degraded_runs_never_read_ok(paper, overrides, status):
+    study = gj.run_study(paper.with_overrides(overrides), runs=2, progress=False)
+    np.testing.assert_array_equal(study.status, status)
+    assert study.summary()["failed"] == 2
+    if status == Status.no_convergence:
+        o = study.outcomes
+        np.testing.assert_array_equal(o["corrector_failures"], o["pc_cycles"])
