@@ -68,6 +68,27 @@ def test_batch_equals_per_run_loop_and_chunking(name, law):
         assert_outcomes_equal(whole.outcomes, one._asdict(), rows=i, tolerance=tolerance)
 
 
+@pytest.mark.parametrize("name", list(gj.systems()))
+def test_one_device_reproduces_two_to_the_batch_tolerance(name):
+    # The README's determinism statement: statuses and integer outcomes identical, floats
+    # within batch_tolerance, whatever the number of devices (and the chunking, above).
+    scenario = example(name)
+    two = gj.run_study(scenario, runs=6, seed=3, progress=False)
+    one = gj.run_study(scenario, runs=6, seed=3, progress=False, n_devices=1)
+    assert_outcomes_equal(two.outcomes, one.outcomes, tolerance=gj.get_system(name).batch_tolerance)
+
+
+@pytest.mark.slow
+def test_paper_scale_chunking_and_devices_agree(paper_scale):
+    scenario = gj.load_scenario("deep-impact-los")
+    runs = 2000 if paper_scale else 64
+    whole = gj.run_study(scenario, runs=runs, progress=False)
+    tolerance = gj.get_system("impactor").batch_tolerance
+    for kwargs in ({"chunk_size": 300 if paper_scale else 10}, {"n_devices": 1}):
+        other = gj.run_study(scenario, runs=runs, progress=False, **kwargs)
+        assert_outcomes_equal(whole.outcomes, other.outcomes, tolerance=tolerance)
+
+
 @pytest.mark.parametrize("name, law", CASES)
 def test_a_failed_run_is_counted_and_left_out(name, law, monkeypatch):
     """A run whose outcome is not finite gets the ``nan`` status, is counted in ``failed`` and

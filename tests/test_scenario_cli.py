@@ -50,7 +50,7 @@ BAD_INPUT = [
     (["run", "autonav-predictive", "--set", "camera.max_bin_log2=5"], "camera.max_bin_log2: 5"),
     (
         ["run", "autonav-predictive", "--set", "dynamics.sun_direction=[0.0,0.0,0.0]"],
-        "dynamics.sun_direction: [0.0, 0.0, 0.0] has length 0; allowed: a direction of length in [1e-6, 1e6]",
+        "dynamics.sun_direction: [0.0, 0.0, 0.0] has length 0; allowed: a direction",
     ),
 ]
 APN = "bennu-apn"
