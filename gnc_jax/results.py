@@ -51,7 +51,10 @@ def summarize(study) -> dict[str, Any]:
     system = get_system(sc.kind)
     if system.laws():
         out["law"] = sc.config["guidance"]["law"]
-    out.update(system.statistics(study.outcomes, ok))
+    if ok.any():
+        out.update(system.statistics(study.outcomes, ok))
+    else:
+        out["statistics"] = "none: no run is ok (see failed_by_status)"
     out["paper"] = dict(sc.paper)
     return out
 

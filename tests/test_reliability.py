@@ -311,3 +311,18 @@ def test_an_internal_error_is_one_line_with_a_way_to_the_traceback(capsys, monke
     monkeypatch.setenv(cli.DEBUG_ENV, "1")
     with pytest.raises(RuntimeError):
         cli.main(["run", "deep-impact-los", "--runs", "2"])
+
+
+def test_a_long_study_announces_its_estimate_and_runs_in_chunks_with_progress(capsys, monkeypatch):
+    scenario = gj.load_scenario(TOY)
+    system = gj.get_system(scenario.kind)
+    steps = system.steps_per_run(scenario.config)
+    assert steps is not None
+    # Pretend a step costs enough for 40 runs to take ~100 s: the study must say so up front
+    # and run in chunks of about 10 s (4 runs), so that the progress bar has an ETA.
+    monkeypatch.setattr(type(system), "step_seconds", 100.0 / (20 * steps))
+    study = gj.run_study(scenario, runs=40, progress=None)
+    err = capsys.readouterr().err
+    assert "estimated 40 runs x" in err
+    assert study.chunk_size == 4
+    assert study.summary()["failed"] == 0

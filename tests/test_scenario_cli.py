@@ -304,3 +304,5 @@ def test_a_study_whose_every_run_failed_exits_3(tmp_path, capsys, monkeypatch):
     assert "4 of 4 runs failed" in capsys.readouterr().err
     summary = json.loads((out / "summary.json").read_text())
     assert summary["failed"] == 4 and summary["failed_by_status"] == {"nan": 4}
+    assert summary["statistics"].startswith("none: no run is ok")  # not NaN statistics
+    assert "miss_rms_m" not in summary

@@ -126,6 +126,12 @@ class ToySystem(AbstractSystem):
         if g["range_m"] / g["closing_speed_mps"] < 10 * config["guidance"]["dt_s"]:
             raise ScenarioError("geometry.range_m: too short for ten guidance steps")
 
+    step_seconds = 1e-7  # a guidance step of the double integrator, roughly
+
+    def steps_per_run(self, config):
+        g = config["geometry"]
+        return g["range_m"] / g["closing_speed_mps"] / config["guidance"]["dt_s"]
+
     def build(self, scenario):
         g, c = scenario.config["geometry"], scenario.config
         f = lambda x: jnp.asarray(x, jnp.float64)  # noqa: E731

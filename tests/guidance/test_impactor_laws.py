@@ -20,6 +20,7 @@ from gnc_jax.guidance import (
     PredictiveGuidance,
     switching_curve,
 )
+from gnc_jax.guidance.los import miss_limits
 from gnc_jax.navigation import NavEstimate
 
 
@@ -86,10 +87,10 @@ def test_hysteresis_logic():
     ctx = context(retarget_time_s=jnp.asarray(1e9))
     law = LOSSwitchingCurveGuidance(k1=jnp.asarray(4.0), k2=jnp.asarray(1.0))
     r = np.array([5e7, 0.0, 0.0])
-    sigma = 100.0
+    sigma = 1000.0  # k2 sigma above the engine-resolution floor (~580 m here, see below)
     rdot = -1.02e4
-    w_open = float(switching_curve(5e7, rdot, 400.0))
-    w_close = float(switching_curve(5e7, rdot, 100.0))
+    w_open = float(switching_curve(5e7, rdot, 4000.0))
+    w_close = float(switching_curve(5e7, rdot, 1000.0))
 
     def run(omega, prev):
         v = np.array([rdot, -omega * 5e7, 0.0])  # rho = -r, rho_dot = -v
@@ -108,10 +109,26 @@ def test_hysteresis_logic():
     assert float(cmd.throttle) == 0.0
 
 
+def test_shut_off_tolerance_has_the_engine_resolution_as_floor():
+    # One control step of thrust moves the predicted miss by (T/m) dt t_go; the shut-off
+    # tolerance never goes below half of it (with sigma_B -> 0 the engine could never close).
+    ctx = context(retarget_time_s=jnp.asarray(1e9))
+    r, v = np.array([5e7, 0.0, 0.0]), np.array([-1.02e4, 0.0, 0.0])
+    nav = nav_at(r, v)
+    t_go = 5e7 / 1.02e4
+    half_step = 0.5 * float(ctx.engine.thrust_n / ctx.mass_kg) * ctx.dt_s * t_go
+    for sigma in (0.0, 1.0, 100.0):
+        lo, hi = miss_limits(4.0, 1.0, sigma, 5e7, nav, ctx)
+        assert float(lo) == pytest.approx(max(sigma, half_step))
+        assert float(hi) == pytest.approx(max(4 * sigma, half_step))
+    lo, hi = miss_limits(4.0, 1.0, 1e4, 5e7, nav, ctx)  # a paper-like sigma: the paper's levels
+    assert (float(lo), float(hi)) == (1e4, 4e4)
+
+
 def test_relaxed_switch_tends_to_the_hard_logic():
     ctx = context(retarget_time_s=jnp.asarray(1e9))
     r = np.array([5e7, 0.0, 0.0])
-    w_open = float(switching_curve(5e7, -1.02e4, 400.0))
+    w_open = float(switching_curve(5e7, -1.02e4, 4000.0))
     for omega, prev, expected in (
         (1.2 * w_open, 0.0, 1.0),
         (0.8 * w_open, 0.0, 0.0),
@@ -119,7 +136,7 @@ def test_relaxed_switch_tends_to_the_hard_logic():
         (0.1 * w_open, 1.0, 0.0),
     ):
         v = np.array([-1.02e4, -omega * 5e7, 0.0])
-        st = LOSGuidanceState(jnp.asarray(prev), jnp.asarray(100.0), *(jnp.zeros(()),) * 3)
+        st = LOSGuidanceState(jnp.asarray(prev), jnp.asarray(1000.0), *(jnp.zeros(()),) * 3)
         law = LOSSwitchingCurveGuidance(temperature=jnp.asarray(1e-3), relaxed=True)
         cmd, _ = law.step(st, nav_at(r, v), 0.0, ctx)
         assert float(cmd.throttle) == pytest.approx(expected, abs=1e-6)
@@ -179,9 +196,9 @@ def test_predictive_throttle_covers_the_burn_exactly():
 
 def test_laws_are_differentiable_in_their_gains():
     ctx = context(retarget_time_s=jnp.asarray(1e9))
-    w_open = float(switching_curve(5e7, -1.02e4, 400.0))
+    w_open = float(switching_curve(5e7, -1.02e4, 4000.0))  # sigma_B above the resolution floor
     r, v = np.array([5e7, 0.0, 0.0]), np.array([-1.02e4, -1.02 * w_open * 5e7, 0.0])
-    st = LOSGuidanceState(jnp.asarray(0.3), jnp.asarray(100.0), *(jnp.zeros(()),) * 3)
+    st = LOSGuidanceState(jnp.asarray(0.3), jnp.asarray(1000.0), *(jnp.zeros(()),) * 3)
 
     def throttle(k1):
         law = LOSSwitchingCurveGuidance(k1=k1, temperature=jnp.asarray(0.05), relaxed=True)
