@@ -46,15 +46,31 @@ FAILURES = ("traceback", "hang", "nan_stats", "invariant")
 
 _CAPSULE = gj.get_system("capsule").schema()
 SHAPE_FIELDS = {
-    # Plain floats whose value decides a loop length, a static field or an array shape (every
-    # field that is not a plain float is taken to), measured by comparing the compiled
-    # program's key (tree structure, shapes and static fields of the built (params, law)) of
-    # the example with that of a one-field change, plus the step sizes and the time-of-flight
-    # inputs. Drawing any other float reuses the executable compiled for the example, so the
-    # CI campaign draws these only outside their range (refused before anything is built).
+    # Floats whose value decides a loop length, a static field or an array shape (every field
+    # that is not a float or a fixed-length list of floats is taken to), measured by comparing
+    # the compiled program's key (tree structure, shapes and static fields of the built
+    # (params, law)) of the example with that of a one-field change, plus the step sizes and
+    # the time-of-flight inputs. Drawing any other field reuses the executable compiled for the
+    # example, so the CI campaign draws these only outside their range (refused before
+    # anything is built).
     "toy-intercept": {"geometry.range_m", "geometry.closing_speed_mps", "guidance.dt_s"},
-    "intercept": {"guidance.coast_s", "guidance.dt_s", "navigation.image_interval_s"},
-    "impactor": {"guidance.dt_s", "camera.image_interval_s", "guidance.retarget_tgo_s"},
+    "intercept": {
+        "guidance.coast_s",
+        "guidance.dt_s",
+        "navigation.image_interval_s",
+        *(
+            f"approach.{b}_{q}"
+            for b in ("target", "impactor")
+            for q in ("position_km", "velocity_kmps")
+        ),
+    },
+    "impactor": {
+        "guidance.dt_s",
+        "camera.image_interval_s",
+        "guidance.retarget_tgo_s",
+        "approach.position_km",
+        "approach.velocity_kmps",
+    },
     "capsule": {
         "simulation.dt_s",
         "simulation.control_dt_s",
@@ -66,16 +82,19 @@ SHAPE_FIELDS = {
         "reference.v_end_mps",
         "reference.w_margin",
     },
-    "midcourse": {"navigation.interval_days", "dynamics.window_days"},
+    # the aim point: a new nominal transfer (a design of a few seconds, cached)
+    "midcourse": {"navigation.interval_days", "dynamics.window_days", "mission.aim_b_km"},
 }
 
 
 def shape_fields(system) -> set[str]:
     """The fields of ``system`` that change the compiled program: ``SHAPE_FIELDS`` and every
-    field that is not a plain float."""
+    field that is not a float or a list of floats of fixed length."""
     fields = {f"{s}.{n}": f for s, table in system.schema().items() for n, f in table.items()}
     return SHAPE_FIELDS.get(system.name, set()) | {
-        n for n, f in fields.items() if f.kind != "float"
+        n
+        for n, f in fields.items()
+        if f.kind != "float" and not (f.kind == "floats" and f.length is not None)
     }
 
 

@@ -19,8 +19,8 @@ from hypothesis import HealthCheck, Phase, example, given, settings
 import gnc_jax as gj
 
 TIME_LIMIT_S = 240.0  # per case: the first case of a family compiles its example
-EXAMPLES = {"midcourse": 12, "capsule": 12}  # the slowest to run; others: DEFAULT_EXAMPLES
-DEFAULT_EXAMPLES = 25
+EXAMPLES = {"midcourse": 20, "capsule": 20}  # the slowest to run; others: DEFAULT_EXAMPLES
+DEFAULT_EXAMPLES = 40
 MAX_FIELDS = 3
 
 
