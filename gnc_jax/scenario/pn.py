@@ -12,6 +12,9 @@ from .schema import Field, ScenarioError
 
 F = Field
 
+AU_M = 1.495978707e11
+SUN_RADIUS_M = 6.957e8  # IAU 2015 nominal solar radius
+
 SCHEMA = {
     "approach": {
         "geometry": F(
@@ -136,6 +139,19 @@ def check(cfg: dict) -> None:
                     f"approach.{name}: z = {a[name][2]:g} in a planar scenario; allowed: z = 0 "
                     "(or approach.geometry = 'bennu-3d')"
                 )
+    if a["geometry"] == "bennu-3d":
+        # r = a (1 - e^2) / (1 + e cos nu) of the Table 1 elements (e <= 0.99: a positive
+        # denominator); inside the Sun the target's state is meaningless, and below ~1e-150 m
+        # its direction is not even computable (0/0 in simulation.pn.initial_state).
+        e, nu = a["eccentricity"], math.radians(a["true_anomaly_deg"])
+        r = a["semi_major_axis_au"] * AU_M * (1.0 - e * e) / (1.0 + e * math.cos(nu))
+        if not r > SUN_RADIUS_M:
+            raise ScenarioError(
+                f"approach.semi_major_axis_au: {a['semi_major_axis_au']:g} AU (eccentricity "
+                f"{e:g}, true anomaly {a['true_anomaly_deg']:g} deg) puts the target {r:.3g} m "
+                f"from the Sun's centre; allowed: elements with a heliocentric distance above "
+                f"the Sun's radius, {SUN_RADIUS_M:g} m"
+            )
     tof = time_of_flight_s(cfg)
     if tof <= 0.0:
         raise ScenarioError(

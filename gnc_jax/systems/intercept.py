@@ -6,6 +6,7 @@ Truth, camera, EKF, law and pulses are in :mod:`gnc_jax.simulation.pn`; the laws
 :mod:`gnc_jax.scenario.pn`.
 """
 
+import math
 import pathlib
 from typing import Any, ClassVar
 
@@ -149,6 +150,30 @@ def intercept_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathli
     return files
 
 
+STEP_SECONDS = 3.6e-6
+"""Wall seconds of one guidance step per device, measured by
+``benchmarks/cost_midcourse_intercept.py`` (bennu-apn with the test overrides, 2 devices on
+the 2-core development machine; the model is within 0.8-1.4x of the measured time over the
+coast, image interval and navigation model)."""
+
+
+def intercept_steps(config: dict) -> float:
+    """Cost of one intercept run (:meth:`InterceptSystem.steps_per_run`) in guidance steps of
+    the EKF loop: the guidance steps (a step with perfect navigation costs 0.4 of one), the LOS
+    images (an EKF update costs 1.4 steps) and the final coast's RK4 steps, from the loop
+    lengths :func:`gnc_jax.simulation.pn.build` sets; a float, so that a scenario whose loops
+    would not fit in an integer still gets a (refusable) estimate."""
+    g, nv = config["guidance"], config["navigation"]
+    t_cut = intercept_scenario.time_of_flight_s(config) - g["coast_s"]
+    images = t_cut / nv["image_interval_s"]
+    per_image = nv["image_interval_s"] / g["dt_s"]
+    if images < 1e15 and per_image < 1e15:
+        images, per_image = math.ceil(images - 1e-9), round(per_image)
+    if nv["model"] == "perfect":
+        return float(0.4 * images * per_image + g["coast_steps"])
+    return float(images * per_image + 1.4 * images + g["coast_steps"])
+
+
 @register_system
 class InterceptSystem(AbstractSystem):
     name = "intercept"
@@ -166,6 +191,11 @@ class InterceptSystem(AbstractSystem):
         "guidance.coast_s": 60.0,
         "navigation.knowledge_position_km": [2.0, 0.2, 0.2],
     }
+
+    step_seconds = STEP_SECONDS
+
+    def steps_per_run(self, config):
+        return intercept_steps(config)
 
     def check(self, config):
         intercept_scenario.check(config)

@@ -201,6 +201,46 @@ def midcourse_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathli
     return files
 
 
+# The midcourse cost model, in dopri8 stage evaluations. One propagation from the first fix to
+# the encounter of the packaged phoenix-midcourse transfer (238 days, rtol 1e-13) takes
+# _ARC_STEPS adaptive steps (diffrax's ``num_steps``), each costing _STEP_COST (dopri8: its 12
+# stages; dopri5 and tsit5: measured, their steps are cheaper than their 6 stages suggest), and
+# the steps grow as rtol**-0.13 when rtol tightens. A Newton iteration costs _ITERATION_ARCS
+# propagations (autodiff: one primal carrying three tangents; central differences: Q and six
+# more; STM: the 6 + 18 variational states). All measured by
+# benchmarks/cost_midcourse_intercept.py, which also measures STEP_SECONDS (wall seconds per
+# evaluation per device, 2 devices on the 2-core development machine; the model is within
+# 0.8-1.9x of the measured time over solvers, tolerances, sensitivities and fix counts).
+_ARC_STEPS = {"dopri8": 149.0, "dopri5": 538.0, "tsit5": 542.0}
+_STEP_COST = {"dopri8": 12.0, "dopri5": 2.44, "tsit5": 2.42}
+_RTOL_GROWTH = 0.13
+_ITERATION_ARCS = {"autodiff": 4.0, "central_difference": 7.0, "stm": 5.0}
+STEP_SECONDS = 6.9e-7
+
+
+def midcourse_steps(config: dict) -> float:
+    """Cost of one midcourse run in dopri8 stage evaluations
+    (:meth:`MidcourseSystem.steps_per_run`): propagations to the encounter (the initial and
+    final predictions; per fix the law's Newton iterations and its last prediction, each as
+    long as the time left to the encounter, plus the coast to the next fix), each scaled by
+    rtol and at most ``max_steps`` steps."""
+    dy, nv, g = config["dynamics"], config["navigation"], config["guidance"]
+    law = g[g["law"]]
+    t = midcourse_scenario.epochs_s(config)
+    span = max((t["encounter_epoch"] - t["first_fix_epoch"]) / 86400.0, 1.0)
+    steps = _ARC_STEPS[dy["solver"]] * (dy["rtol"] / 1e-13) ** -_RTOL_GROWTH
+    arc = min(steps, dy["max_steps"]) * _STEP_COST[dy["solver"]]  # from the first fix
+    solve = law["iterations"] * _ITERATION_ARCS[law["sensitivity"]] + 1.0
+    arcs = 2.0
+    if g["enabled"]:
+        interval = nv["interval_days"]
+        left = sum(max(span - i * interval, 1.0) / span for i in range(nv["fixes"]))
+        arcs += left * solve + (nv["fixes"] - 1) * min(interval / span, 1.0)
+        if midcourse_sim._has_errors(config):
+            arcs += solve  # the error-free reference correction
+    return arcs * arc
+
+
 @register_system
 class MidcourseSystem(AbstractSystem):
     name = "midcourse"
@@ -232,6 +272,11 @@ class MidcourseSystem(AbstractSystem):
     # millimetres on a miss of tens of metres (tests/simulation/test_midcourse_sim.py)
     batch_tolerance = (1e-9, 0.05)
     test_overrides: ClassVar[dict[str, Any]] = {}
+
+    step_seconds = STEP_SECONDS  # see _ARC_STEPS
+
+    def steps_per_run(self, config):
+        return midcourse_steps(config)
 
     def check(self, config):
         midcourse_scenario.check(config)
