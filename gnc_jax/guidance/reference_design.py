@@ -24,6 +24,7 @@ import json
 import math
 import os
 import pathlib
+import sys
 from typing import NamedTuple
 
 import equinox as eqx
@@ -672,6 +673,12 @@ def reference_for(problem: NominalProblem, description: dict, **design_kwargs):
             data = dict(np.load(fh))
     else:
         entry, vehicle = description["entry"], description["vehicle"]
+        print(
+            "gnc_jax: designing the reference trajectory of this entry and vehicle (once; about "
+            f"1-3 min on a 2-core machine; cached in {path})",
+            file=sys.stderr,
+            flush=True,
+        )
         require_reachable(problem, entry, vehicle, design_kwargs.get("sigma_1_guess"))
         d = design(problem, **design_kwargs)
         require_design(problem, d, entry, vehicle)
