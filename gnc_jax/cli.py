@@ -30,54 +30,31 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"gnc-jax: error: {message} (see {self.prog} --help)\n")
 
 
-def _positive_int(name):
+def _number(name, convert, ok, allowed):
+    """An argparse type: ``convert(text)`` checked by ``ok``; one line naming ``name`` else."""
+
     def parse(text):
         try:
-            value = int(text)
+            value = convert(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(
-                f"{name}: {text!r} is not an integer; allowed: an integer >= 1"
-            ) from None
-        if value <= 0:
-            raise argparse.ArgumentTypeError(f"{name}: {value}; allowed: an integer >= 1")
+            value = None
+        if value is None or not ok(value):
+            raise argparse.ArgumentTypeError(f"{name}: {text!r}; allowed: {allowed}")
         return value
 
     return parse
 
 
-def _seed(text):
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"--seed: {text!r}; allowed: an integer in [0, 2^32)"
-        ) from None
-    if not 0 <= value < 2**32:
-        raise argparse.ArgumentTypeError(f"--seed: {value}; allowed: an integer in [0, 2^32)")
-    return value
+def _positive_int(name):
+    return _number(name, int, lambda v: v >= 1, "an integer >= 1")
+
+
+_seed = _number("--seed", int, lambda v: 0 <= v < 2**32, "an integer in [0, 2^32)")
+_hours = _number("--max-hours", float, lambda v: 0 < v < float("inf"), "a number > 0")
 
 
 def _fraction(name):
-    def parse(text):
-        try:
-            value = float(text)
-        except ValueError:
-            value = float("nan")
-        if not 0.0 <= value <= 1.0:
-            raise argparse.ArgumentTypeError(f"{name}: {text!r}; allowed: a number in [0, 1]")
-        return value
-
-    return parse
-
-
-def _hours(text):
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not 0.0 < value < float("inf"):
-        raise argparse.ArgumentTypeError(f"--max-hours: {text!r}; allowed: a number > 0")
-    return value
+    return _number(name, float, lambda v: 0 <= v <= 1, "a number in [0, 1]")
 
 
 def _too_many_failed(summary: dict, max_failed: float) -> bool:
