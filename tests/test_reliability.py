@@ -136,6 +136,16 @@ def test_predictive_schedule_conflicts_name_both_fields(capsys, monkeypatch):
     gj.load_scenario("deep-impact-los", {"camera.image_interval_s": 600.0})
 
 
+def test_a_retarget_after_the_last_scheduled_burn_is_refused(capsys, monkeypatch):
+    # Found trying other approaches: at 2 km/s from 30000 km the default burn schedule ends
+    # 7500 s before the retarget, and every run "hit" 3.2 km from the new aim point, all ok.
+    argv = ["run", "deep-impact-predictive", "--set", "approach.velocity_kmps=[-2,0,0]"]
+    argv += ["--set", "approach.position_km=[30000,0,0]"]
+    err = refused(argv, capsys, monkeypatch)
+    assert "guidance.retarget_tgo_s: the aim point changes at 14250 s" in err
+    assert "after the last burn of guidance.predictive.burn_times_s (6780 s)" in err
+
+
 # ---- runaway cost ---------------------------------------------------------------------------
 
 

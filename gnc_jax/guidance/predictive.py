@@ -71,13 +71,23 @@ class PredictiveGuidance(AbstractImpactorGuidance):
                 f"guidance.predictive.burn_times_s: {bt} s; allowed: increasing mission times"
             )
         t_cut = time_of_flight_s(config) - g["cutoff_tgo_s"]
+        tof = time_of_flight_s(config)
         late = [b for b in bt if b >= t_cut]
         if late:
+            or_cutoff = f", or guidance.cutoff_tgo_s < {tof - max(bt):g} s" if tof > max(bt) else ""
             raise ScenarioError(
                 f"guidance.predictive.burn_times_s: the burn at {late[0]:g} s is not before the "
-                f"cut-off at {t_cut:g} s (time of flight - guidance.cutoff_tgo_s = "
-                f"{g['cutoff_tgo_s']:g} s); allowed: burns before {t_cut:g} s, or "
-                f"guidance.cutoff_tgo_s < {time_of_flight_s(config) - max(bt):g} s"
+                f"cut-off at {t_cut:g} s (time of flight {tof:g} s - guidance.cutoff_tgo_s "
+                f"{g['cutoff_tgo_s']:g} s); allowed: burns before {t_cut:g} s{or_cutoff}"
+            )
+        t_retarget = tof - g["retarget_tgo_s"]
+        if g["aim_final_km"] != g["aim_initial_km"] and not bt[-1] >= t_retarget:
+            raise ScenarioError(
+                f"guidance.retarget_tgo_s: the aim point changes at {t_retarget:g} s (time of "
+                f"flight {tof:g} s - {g['retarget_tgo_s']:g} s), after the last burn of "
+                f"guidance.predictive.burn_times_s ({bt[-1]:g} s), so the new aim point is never "
+                f"flown; allowed: a burn at or after {t_retarget:g} s (and before the cut-off at "
+                f"{t_cut:g} s), or retarget_tgo_s >= {tof - bt[-1]:g} s"
             )
         for b1, b2 in zip(bt, bt[1:]):
             if b2 - b1 < cam["image_interval_s"]:
