@@ -109,6 +109,7 @@ def test_the_loader_and_run_accept_the_same_seeds(tmp_path):
         ("approach.position_km=[1e9,0,0]", "approach.position_km: 1000000000.0 is out of range"),
         ("spacecraft.mass_kg=1e-6", "spacecraft.propellant_kg: 25 kg is not less than"),
         ("camera.image_interval_s=3600", "camera.image_interval_s: 3600 s leaves"),
+        ("spacecraft.isp_s=5e-324", "spacecraft.isp_s: 5e-324 is out of range"),
     ],
 )
 def test_impactor_inputs_outside_the_models_domain_are_refused(
@@ -117,6 +118,16 @@ def test_impactor_inputs_outside_the_models_domain_are_refused(
     err = refused(["run", "deep-impact-los", "--runs", "2", "--set", setting], capsys, monkeypatch)
     assert message in err
     assert "allowed:" in err
+
+
+def test_an_approach_beyond_the_propellant_budget_is_refused(capsys, monkeypatch):
+    # Found by the fuzz campaign: an approach 104000 km off the target "burned" all 25 kg and
+    # every run was flagged `propellant`; the impulsive lower bound refuses it up front.
+    argv = ["run", "deep-impact-los", "--set", "approach.position_km=[73440,73440,73440]"]
+    err = refused(argv, capsys, monkeypatch)
+    assert "needs at least 1.44e+04 m/s, the propellant gives 157 m/s" in err
+    # 157 m/s = 230 s x g0 x ln(372 / 347)
+    assert 230 * 9.80665 * np.log(372 / 347) == pytest.approx(157, abs=0.5)
 
 
 def test_a_slow_far_approach_is_refused_by_its_time_of_flight(capsys, monkeypatch):

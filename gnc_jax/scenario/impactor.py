@@ -66,11 +66,11 @@ SCHEMA = {
         "isp_s": F(
             "float",
             230.0,
-            lo=0.0,
-            lo_open=True,
+            lo=10.0,
             hi=1e4,
             units="s",
-            doc="specific impulse (hydrazine monopropellant class; not in the paper)",
+            doc="specific impulse (hydrazine monopropellant class; not in the paper); >= 10 s: "
+            "a thruster",
         ),
     },
     "dynamics": {
@@ -253,6 +253,28 @@ def _direction(name: str, v) -> list[float]:
     return [x / n for x in v]
 
 
+def _check_dv_budget(cfg: dict, tof: float) -> None:
+    """Refuse an approach whose nominal B-plane offset from the aim point needs more Δv than
+    the propellant holds, even as one impulse at the start (a lower bound of any law's need)."""
+    a, sc = cfg["approach"], cfg["spacecraft"]
+    r, v = a["position_km"], a["velocity_kmps"]
+    speed = _norm(v)
+    along = sum(x * y for x, y in zip(r, v)) / speed
+    b_vec = [x - along * y / speed for x, y in zip(r, v)]  # nominal offset, km, S-normal
+    aim = max(_norm(cfg["guidance"]["aim_initial_km"]), _norm(cfg["guidance"]["aim_final_km"]))
+    need = max(_norm(b_vec) - aim, 0.0) * 1e3 / tof
+    capacity = (
+        sc["isp_s"] * 9.80665 * math.log(sc["mass_kg"] / (sc["mass_kg"] - sc["propellant_kg"]))
+    )
+    if need > capacity:
+        raise ScenarioError(
+            f"approach.position_km: the nominal approach passes {_norm(b_vec):.4g} km from the "
+            f"target; reaching the aim point needs at least {need:.3g} m/s, the propellant "
+            f"gives {capacity:.3g} m/s (spacecraft.propellant_kg, isp_s, mass_kg); allowed: an "
+            "approach aimed within reach"
+        )
+
+
 def check(cfg: dict) -> None:
     """Cross-field and physical-domain checks of a validated impactor configuration."""
     a, g, cam, dy = cfg["approach"], cfg["guidance"], cfg["camera"], cfg["dynamics"]
@@ -309,6 +331,7 @@ def check(cfg: dict) -> None:
             f"spacecraft.propellant_kg: {sc['propellant_kg']:g} kg is not less than "
             f"spacecraft.mass_kg = {sc['mass_kg']:g} kg; allowed: [0, mass_kg)"
         )
+    _check_dv_budget(cfg, tof)
     ratio = cam["image_interval_s"] / g["dt_s"]
     if abs(ratio - round(ratio)) > 1e-9 * ratio:
         raise ScenarioError(

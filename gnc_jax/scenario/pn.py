@@ -61,7 +61,9 @@ SCHEMA = {
     "spacecraft": {
         "mass_kg": F("float", 372.0, lo=0.0, lo_open=True, hi=1e5, units="kg", doc="seed 000"),
         "thrust_n": F("float", 88.0, lo=0.0, lo_open=True, hi=1e4, units="N", doc="seed 000"),
-        "isp_s": F("float", 230.0, lo=0.0, lo_open=True, hi=1e4, units="s"),
+        "isp_s": F(
+            "float", 230.0, lo=10.0, hi=1e4, units="s", doc="specific impulse; >= 10 s: a thruster"
+        ),
         "pulse_width_s": F(
             "float",
             0.05,
@@ -123,11 +125,14 @@ def time_of_flight_s(cfg: dict) -> float:
 def check(cfg: dict) -> None:
     """Cross-field checks of a validated pn configuration."""
     a, g, sc, nv = cfg["approach"], cfg["guidance"], cfg["spacecraft"], cfg["navigation"]
-    if math.hypot(*a["target_position_km"]) == 0.0:
-        raise ScenarioError(
-            "approach.target_position_km: [0, 0, 0]; allowed: a non-zero heliocentric position"
-        )
     if a["geometry"] == "planar":
+        for name in ("target_position_km", "impactor_position_km"):
+            r = 1e3 * math.hypot(*a[name])
+            if not r > SUN_RADIUS_M:
+                raise ScenarioError(
+                    f"approach.{name}: {a[name]} is {r:.3g} m from the Sun's centre; allowed: a "
+                    f"heliocentric position above the Sun's radius, {SUN_RADIUS_M:g} m"
+                )
         for name in (
             "target_position_km",
             "target_velocity_kmps",
