@@ -11,9 +11,10 @@ from typing import NamedTuple
 import equinox as eqx
 import jax.numpy as jnp
 
+from .._numerics import dot3
 from .._types import Array, Float, Scalar, Vector3
 from ..geometry.bplane import b_plane_crossing
-from ..integrate import integrate_fixed
+from ..integrate import integrate_fixed, rk4_step
 
 G0 = 9.80665  # standard gravity, m/s^2 (Isp and accelerometer "g" units)
 
@@ -39,13 +40,15 @@ class RelativeDynamics(eqx.Module):
 
     def gravity(self, r: Vector3) -> Vector3:
         """Differential gravitational acceleration at ``r``, m/s^2."""
-        r2 = jnp.dot(r, r)
+        r2 = dot3(r, r)
         # At the centre itself (a zero-error approach aims exactly there) the term is 0, not NaN.
         centre = r2 == 0.0
         r2 = jnp.where(centre, 1.0, r2)
         point_mass = jnp.where(centre, 0.0, -self.mu_target * r / (r2 * jnp.sqrt(r2)))
         s = self.sun_direction
-        tide = self.tide_rate2 * (3.0 * jnp.dot(r, s) * s - r)
+        # By component: the Sun direction is shared by a batch (see _numerics.sub3).
+        d = 3.0 * dot3(r, s)
+        tide = self.tide_rate2 * jnp.stack([d * s[0] - r[0], d * s[1] - r[1], d * s[2] - r[2]])
         return point_mass + tide
 
 
@@ -83,6 +86,25 @@ def perturb_direction(u: Vector3, angles_rad: Float[Array, "2"]) -> Vector3:
     """Tilt the unit vector ``u`` by two small angles about two axes perpendicular to it."""
     tilted = u + angles_rad @ perpendicular_basis(u)
     return tilted / jnp.linalg.norm(tilted)
+
+
+def tilt_direction(u: Vector3, delta: Vector3) -> Vector3:
+    """The unit vector ``u`` tilted by the small pointing error ``delta`` (rad): the part of
+    ``delta`` perpendicular to ``u`` is added, then the sum normalised.
+
+    For ``delta`` ~ N(0, sigma^2 I_3) the tilt is N(0, sigma^2) about each of any two axes
+    perpendicular to ``u`` (the distribution of :func:`perturb_direction` with two independent
+    angles), without building a basis per call.
+    """
+    tilted = u + delta - dot3(delta, u) * u
+    return tilted / jnp.sqrt(dot3(tilted, tilted))
+
+
+def rk4(
+    dynamics: RelativeDynamics, y: ImpactorState, thrust_vector_n: Vector3, mass_flow, dt
+) -> ImpactorState:
+    """One classical RK4 step of ``dt`` (s) with the thrust and mass flow held over it."""
+    return rk4_step(vector_field, 0.0, y, dt, (dynamics, thrust_vector_n, mass_flow))
 
 
 def propagate(

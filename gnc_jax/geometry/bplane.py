@@ -78,4 +78,4 @@ def b_plane_crossing(
 
 def b_plane_point_to_inertial(b_tr: Float[Array, "2"], c_bi: Matrix3) -> Vector3:
     """Inertial position of the B-plane point (B_T, B_R) (m)."""
-    return b_tr[0] * c_bi[1] + b_tr[1] * c_bi[2]
+    return jnp.stack([b_tr[0] * c_bi[1, i] + b_tr[1] * c_bi[2, i] for i in range(3)])

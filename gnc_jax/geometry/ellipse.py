@@ -2,6 +2,7 @@
 
 import jax.numpy as jnp
 
+from .._numerics import matmul
 from .._types import Array, Covariance6, Float, Matrix3, Scalar
 
 
@@ -26,7 +27,7 @@ def b_plane_position_covariance(p0: Covariance6, t_go, c_bi: Matrix3) -> Float[A
     """
     prr = p0[:3, :3] + t_go * (p0[:3, 3:] + p0[3:, :3]) + t_go**2 * p0[3:, 3:]
     tr = c_bi[1:]
-    return tr @ prr @ tr.T
+    return matmul(matmul(tr, prr), tr.T)
 
 
 def error_ellipse(d: Float[Array, "2 2"]) -> tuple[Scalar, Scalar, Scalar]:

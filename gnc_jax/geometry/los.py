@@ -5,6 +5,7 @@
 
 import jax.numpy as jnp
 
+from .._numerics import cross3, dot3, norm3
 from .._types import Matrix3, Scalar, Vector3
 
 
@@ -22,12 +23,12 @@ def los_frame(rho: Vector3, r_axis: Vector3) -> Matrix3:
 
 def los_rate(rho: Vector3, rho_dot: Vector3) -> Vector3:
     """LOS angular-rate vector omega = rho x rho_dot / rho^2 (seed 000 eq. 21), rad/s."""
-    return jnp.cross(rho, rho_dot) / jnp.dot(rho, rho)
+    return cross3(rho, rho_dot) / dot3(rho, rho)
 
 
 def range_rate(rho: Vector3, rho_dot: Vector3) -> Scalar:
     """Range rate rho_dot = rho . rho_dot / |rho| (seed 000 eq. 22), m/s (negative closing)."""
-    return jnp.dot(rho, rho_dot) / jnp.linalg.norm(rho)
+    return dot3(rho, rho_dot) / norm3(rho)
 
 
 def unforced_miss(rho: Vector3, rho_dot: Vector3) -> Scalar:
@@ -36,8 +37,8 @@ def unforced_miss(rho: Vector3, rho_dot: Vector3) -> Scalar:
     rho_f = rho0^2 omega0 / sqrt(rho_dot0^2 + rho0^2 omega0^2); for straight-line relative
     motion this equals the closest-approach distance.
     """
-    rho0 = jnp.linalg.norm(rho)
-    omega0 = jnp.linalg.norm(los_rate(rho, rho_dot))
+    rho0 = norm3(rho)
+    omega0 = norm3(los_rate(rho, rho_dot))
     rdot0 = range_rate(rho, rho_dot)
     return rho0**2 * omega0 / jnp.sqrt(rdot0**2 + rho0**2 * omega0**2)
 
@@ -48,10 +49,9 @@ def zero_effort_miss(rho: Vector3, rho_dot: Vector3) -> Vector3:
     The component of ``rho`` perpendicular to ``rho_dot``; its norm is :func:`unforced_miss`.
     Accelerating the impactor along it reduces the miss.
     """
-    u = rho_dot / jnp.linalg.norm(rho_dot)
-    return rho - jnp.dot(rho, u) * u
+    return rho - (dot3(rho, rho_dot) / dot3(rho_dot, rho_dot)) * rho_dot
 
 
 def time_to_go(rho: Vector3, rho_dot: Vector3) -> Scalar:
     """Time to go to closest approach of straight-line motion, s (seed 000 eq. 9 form)."""
-    return -jnp.dot(rho, rho_dot) / jnp.dot(rho_dot, rho_dot)
+    return -dot3(rho, rho_dot) / dot3(rho_dot, rho_dot)

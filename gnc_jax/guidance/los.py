@@ -13,7 +13,7 @@ from typing import NamedTuple
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._numerics import safe_norm
+from .._numerics import norm3, safe_norm, sub3
 from .._types import Scalar
 from ..geometry.ellipse import b_plane_position_covariance, mean_position_error
 from ..geometry.los import los_rate, range_rate, zero_effort_miss
@@ -109,16 +109,16 @@ class LOSSwitchingCurveGuidance(AbstractImpactorGuidance):
     def plan(self, state, nav, t, ctx: ImpactorGuidanceContext) -> LOSGuidanceState:
         # Error ellipse of the predicted impact point (eqs. 8-11), t_go = rho / |V_inf| (eq. 9).
         rho = ctx.aim_point(t) - nav.r
-        t_go = jnp.linalg.norm(rho) / jnp.linalg.norm(nav.v)
+        t_go = norm3(rho) / norm3(nav.v)
         d = b_plane_position_covariance(nav.p, t_go, ctx.c_bi)
         return state._replace(sigma_b_m=mean_position_error(d))
 
     def step(self, state, nav, t, ctx: ImpactorGuidanceContext):
-        rho = ctx.aim_point(t) - nav.r
+        rho = sub3(ctx.aim_point(t), nav.r)
         rho_dot = -nav.v  # the target is the origin; the aim point is fixed to it
-        rho_n = jnp.linalg.norm(rho)
+        rho_n = norm3(rho)
         rdot = range_rate(rho, rho_dot)
-        omega = jnp.linalg.norm(los_rate(rho, rho_dot))
+        omega = norm3(los_rate(rho, rho_dot))
         rho_close, rho_open = miss_limits(self.k1, self.k2, state.sigma_b_m, rho_n, nav, ctx)
         w_open = switching_curve(rho_n, rdot, rho_open)
         w_close = switching_curve(rho_n, rdot, rho_close)

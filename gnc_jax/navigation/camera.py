@@ -7,6 +7,7 @@ p/f and l/f (rad, tangent-plane angles) so that its numbers are well scaled.
 
 import jax.numpy as jnp
 
+from .._numerics import cross3, dot3, matvec3
 from .._types import Array, Float, Matrix3, Vector3
 
 
@@ -15,28 +16,37 @@ def camera_attitude(boresight: Vector3, up_hint: Vector3) -> Matrix3:
 
     ``up_hint`` fixes the roll: x_c is along up_hint x z_c (the B-plane R axis is used).
     """
-    z = boresight / jnp.linalg.norm(boresight)
-    x = jnp.cross(up_hint, z)
-    x = x / jnp.linalg.norm(x)
-    y = jnp.cross(z, x)
+    z = boresight / jnp.sqrt(dot3(boresight, boresight))
+    x = cross3(up_hint, z)
+    x = x / jnp.sqrt(dot3(x, x))
+    y = cross3(z, x)
     return jnp.stack([x, y, z])
 
 
 def small_rotation(theta: Vector3) -> Matrix3:
     """Rotation matrix of the rotation vector ``theta`` (rad), Rodrigues' formula."""
-    angle = jnp.sqrt(jnp.dot(theta, theta) + 1e-300)
+    angle = jnp.sqrt(dot3(theta, theta) + 1e-300)
     k = theta / angle
-    kx = jnp.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return jnp.eye(3) + jnp.sin(angle) * kx + (1.0 - jnp.cos(angle)) * kx @ kx
+    s, c1 = jnp.sin(angle), 1.0 - jnp.cos(angle)
+    # I + sin(a) [k x] + (1 - cos(a)) [k x]^2, with [k x]^2 = k k^T - I written out.
+    kk = k[:, None] * k[None, :]
+    kx = jnp.stack(
+        [
+            jnp.stack([0.0 * k[0], -k[2], k[1]]),
+            jnp.stack([k[2], 0.0 * k[0], -k[0]]),
+            jnp.stack([-k[1], k[0], 0.0 * k[0]]),
+        ]
+    )
+    return jnp.eye(3) * (1.0 - c1) + s * kx + c1 * kk
 
 
 def project(c_ci: Matrix3, los: Vector3, focal_length_m) -> Float[Array, "2"]:
     """Focal-plane coordinates (p, l) in m of a target seen along ``los`` (inertial)."""
-    xc = c_ci @ los
+    xc = matvec3(c_ci, los)
     return focal_length_m * xc[:2] / xc[2]
 
 
 def los_angles(c_ci: Matrix3, los: Vector3) -> Float[Array, "2"]:
     """Tangent-plane angles (p/f, l/f) in rad of a target seen along ``los``."""
-    xc = c_ci @ los
+    xc = matvec3(c_ci, los)
     return xc[:2] / xc[2]

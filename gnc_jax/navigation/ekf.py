@@ -11,6 +11,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from .._numerics import matmul, matvec3
 from .._types import Array, Covariance6, Float, Matrix3, State6, Vector3
 from .camera import los_angles
 
@@ -38,6 +39,14 @@ def propagate_state(nav: NavEstimate, dv_measured: Vector3, dt) -> NavEstimate:
     return NavEstimate(jnp.concatenate([r_new, v_new]), nav.p)
 
 
+def _symmetric(entry, n: int) -> Float[Array, "n n"]:
+    """The n x n symmetric matrix whose (i, j) entry, i <= j, is ``entry(i, j)``."""
+    upper = {(i, j): entry(i, j) for i in range(n) for j in range(i, n)}
+    return jnp.stack(
+        [jnp.stack([upper[(min(i, j), max(i, j))] for j in range(n)]) for i in range(n)]
+    )
+
+
 def propagate_covariance(p: Covariance6, dt, q_accel, q_dv) -> Covariance6:
     """P <- Phi P Phi^T + Q over ``dt`` for straight-line motion.
 
@@ -45,12 +54,22 @@ def propagate_covariance(p: Covariance6, dt, q_accel, q_dv) -> Covariance6:
         q_accel: white-acceleration spectral density (m^2/s^3), unmodelled forces.
         q_dv: variance of the accelerometer-measured Δv error over the interval (m^2/s^2 per
             axis), added to the velocity block (burn execution seen through the accelerometer).
+
+    Written out entry by entry (Phi = [[I, dt I], [0, I]]): under ``vmap`` these are a few
+    fused elementwise loops over the batch instead of batched 6x6 products.
     """
-    eye = jnp.eye(3)
-    phi = jnp.block([[eye, dt * eye], [jnp.zeros((3, 3)), eye]])
-    q = q_accel * jnp.block([[dt**3 / 3 * eye, dt**2 / 2 * eye], [dt**2 / 2 * eye, dt * eye]])
-    q = q + jnp.block([[jnp.zeros((3, 3)), jnp.zeros((3, 3))], [jnp.zeros((3, 3)), q_dv * eye]])
-    return phi @ p @ phi.T + q
+    q_rr, q_rv, q_vv = q_accel * dt**3 / 3.0, q_accel * dt**2 / 2.0, q_accel * dt + q_dv
+
+    def entry(i, j):
+        if j < 3:  # both position (i <= j)
+            v = p[i, j] + dt * (p[i, j + 3] + p[i + 3, j]) + dt * dt * p[i + 3, j + 3]
+            return v + q_rr if i == j else v
+        if i < 3:  # position-velocity
+            v = p[i, j] + dt * p[i + 3, j]
+            return v + q_rv if j == i + 3 else v
+        return p[i, j] + q_vv if i == j else p[i, j]
+
+    return _symmetric(entry, 6)
 
 
 class MeasurementPrediction(NamedTuple):
@@ -74,8 +93,37 @@ def predict_measurement(
     covariance S = H P H^T + R of the measurement function ``h`` with noise covariance ``r_cov``."""
     z_pred = h(nav.x)
     hj = jax.jacfwd(h)(nav.x)
-    s = hj @ nav.p @ hj.T + r_cov
+    s = matmul(matmul(hj, nav.p), hj.T) + r_cov
     return MeasurementPrediction(z_pred, hj, r_cov, s)
+
+
+def predict_los(
+    nav: NavEstimate, c_ci: Matrix3, r_cov: Float[Array, "2 2"]
+) -> MeasurementPrediction:
+    """:func:`predict_measurement` of :func:`los_model` with its Jacobian in closed form.
+
+    With x_c = C (-r) and z = (x_c[0], x_c[1]) / x_c[2]: dz/dr = -(C[:2] - z C[2]) / x_c[2] and
+    dz/dv = 0, so S = H_r P_rr H_r^T + R needs only the position block.
+    """
+    xc = matvec3(c_ci, -nav.r)
+    inv = 1.0 / xc[2]
+    z = xc[:2] * inv
+    h_r = -(c_ci[:2] - z[:, None] * c_ci[2][None, :]) * inv
+    hj = jnp.concatenate([h_r, jnp.zeros((2, 3))], axis=1)
+    s = matmul(matmul(h_r, nav.p[:3, :3]), h_r.T) + r_cov
+    return MeasurementPrediction(z, hj, r_cov, s)
+
+
+def _inverse(s: Float[Array, "m m"]) -> Float[Array, "m m"]:
+    """Inverse of a small symmetric positive-definite matrix: closed form for 1x1 and 2x2
+    (no LAPACK call per run under ``vmap``), a solve otherwise."""
+    m = s.shape[0]
+    if m == 1:
+        return 1.0 / s
+    if m == 2:
+        det = s[0, 0] * s[1, 1] - s[0, 1] * s[1, 0]
+        return jnp.stack([jnp.stack([s[1, 1], -s[0, 1]]), jnp.stack([-s[1, 0], s[0, 0]])]) / det
+    return jnp.linalg.solve(s, jnp.eye(m))
 
 
 def ekf_update(
@@ -84,23 +132,34 @@ def ekf_update(
     """EKF update with the measurement ``z`` (Joseph form, any measurement function).
 
     K = P H^T S^-1, x <- x + K (z - h(x)), P <- (I - K H) P (I - K H)^T + K R K^T
-    (symmetrised), with ``predicted`` from :func:`predict_measurement`. When ``valid`` is false
+    (symmetric), with ``predicted`` from :func:`predict_measurement`. When ``valid`` is false
     (a rejected image) the estimate is returned unchanged.
+
+    The Joseph form is expanded with S = H P H^T + R into P - K (P H^T)^T - (P H^T) K^T
+    + K S K^T and written out entry by entry: O(n^2 m^2) scalar products that XLA fuses under
+    ``vmap``, and a closed-form inverse of a 1x1 or 2x2 S (no LAPACK call per run).
 
     Returns:
         The updated estimate and the innovation z - h(x_hat).
     """
-    hj, r_meas, s = predicted.jacobian, predicted.r_cov, predicted.s
+    hj, s = predicted.jacobian, predicted.s
+    n, m = hj.shape[1], hj.shape[0]
     # A filter that is certain (P = 0) of a noiseless measurement (R = 0) has S = 0 and gains
     # nothing from the image: K = P H^T S^-1 = 0. The floor (far below any real S) keeps the
-    # solve finite there and changes nothing elsewhere.
-    s = s + _S_FLOOR * jnp.eye(s.shape[0])
-    k = jnp.linalg.solve(s, hj @ nav.p).T
+    # inverse finite there and changes nothing elsewhere.
+    s = s + _S_FLOOR * jnp.eye(m)
+    pht = matmul(nav.p, hj.T)  # P H^T, n x m
+    k = matmul(pht, _inverse(s))
+    ks = matmul(k, s)
     innovation = z - predicted.z
-    x = nav.x + k @ innovation
-    ikh = jnp.eye(nav.x.shape[0]) - k @ hj
-    p = ikh @ nav.p @ ikh.T + k @ r_meas @ k.T
-    p = 0.5 * (p + p.T)
+    x = jnp.stack([nav.x[i] + sum(k[i, a] * innovation[a] for a in range(m)) for i in range(n)])
+
+    def entry(i, j):
+        return nav.p[i, j] + sum(
+            ks[i, a] * k[j, a] - k[i, a] * pht[j, a] - pht[i, a] * k[j, a] for a in range(m)
+        )
+
+    p = _symmetric(entry, n)
     updated = jax.tree_util.tree_map(lambda a, b: jnp.where(valid, a, b), NavEstimate(x, p), nav)
     return updated, innovation
 
@@ -124,5 +183,5 @@ def update_los(
     Returns:
         The updated estimate and the innovation (rad).
     """
-    predicted = predict_measurement(nav, los_model(c_ci), sigma_rad**2 * jnp.eye(2))
+    predicted = predict_los(nav, c_ci, sigma_rad**2 * jnp.eye(2))
     return ekf_update(nav, z, predicted)

@@ -15,7 +15,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._numerics import safe_norm
+from .._numerics import computed_once, matmul, matvec3, safe_norm
 from .._random import stream_key, stream_normal
 from .._status import Status
 from .._types import Array, Float, PRNGKeyArray, Scalar, Vector3
@@ -25,8 +25,8 @@ from ..dynamics.impactor import (
     ImpactorState,
     RelativeDynamics,
     coast_to_b_plane,
-    perturb_direction,
-    propagate,
+    rk4,
+    tilt_direction,
 )
 from ..geometry.bplane import b_plane_frame, check_b_plane_frame
 from ..geometry.ellipse import b_plane_position_covariance, mean_position_error
@@ -35,10 +35,8 @@ from ..navigation.camera import camera_attitude, small_rotation
 from ..navigation.ekf import (
     NavEstimate,
     ekf_update,
-    los_model,
-    predict_measurement,
+    predict_los,
     propagate_covariance,
-    propagate_state,
 )
 from ..navigation.measurements import (
     AbstractMeasurement,
@@ -248,11 +246,29 @@ class StepRecord(NamedTuple):
 
 
 class _Carry(NamedTuple):
+    """State of one run between control steps.
+
+    Vectors that the control step reads are carried whole: the estimate as ``r_hat``,
+    ``v_hat`` (not one 6-vector), the execution error as magnitude and pointing. Under
+    ``vmap`` a slice of a carried (batch, 6) array along its short axis is a strided read that
+    XLA on CPU does not vectorise (measured 5x slower for the LOS step).
+    """
+
     truth: ImpactorState
-    nav: NavEstimate
+    r_hat: Vector3
+    v_hat: Vector3
+    p: Float[Array, "6 6"]
     law_state: tuple
     throttle_prev: Scalar
-    execution_error: Float[Array, "3"]  # magnitude fraction, two pointing angles (rad)
+    exec_magnitude: Scalar  # standard normal of the current firing's magnitude error
+    exec_pointing: Vector3  # standard normals of its pointing error (3 axes, see tilt)
+    first_magnitude: Scalar  # execution draws of the interval's first ignition
+    first_pointing: Vector3
+    second_magnitude: Scalar  # ... and of its later ignitions (a spare)
+    second_pointing: Vector3
+    ignitions_image: Array  # int, ignitions since the last image
+    spares_used: Array  # int
+    accel_moments: Float[Array, "3"]  # sum of throttle^2 * (1, c, c^2) over the interval
     dv_mps: Scalar
     firings: Array
     burn_time_s: Scalar
@@ -260,10 +276,49 @@ class _Carry(NamedTuple):
     los_error_sq: Scalar  # sum of squared LOS measurement errors (rad^2) over used images
     images_used: Array  # int
 
+    @property
+    def nav(self) -> NavEstimate:
+        return NavEstimate(jnp.concatenate([self.r_hat, self.v_hat]), self.p)
 
-# Stream identifiers of gnc_jax._random: each kind of draw has its own stream, so adding a
-# draw never changes the others.
-_DELIVERY, _KNOW_POS, _KNOW_VEL, _ATT_BIAS, _ACC_BIAS, _IMAGES, _STEPS = range(7)
+    def with_nav(self, nav: NavEstimate) -> "_Carry":
+        return self._replace(r_hat=nav.r, v_hat=nav.v, p=nav.p)
+
+
+# Random streams (gnc_jax._random): each kind of draw has its own stream, so adding a kind
+# never changes the others. A run draws only what it uses, at the rate it is used:
+# * once per run: delivery, knowledge (position, velocity), attitude bias, accelerometer bias
+#   (3 each) and a small table of spare execution draws (_SPARES);
+# * once per image i (stream _IMAGES, index i), IMAGE_DRAWS standard normals:
+#   [0:2] image-processing noise, [2:5] attitude control, [5:8] attitude knowledge,
+#   [8:12] the execution error of the interval's first ignition (magnitude, 3-axis pointing),
+#   [12:18] the accelerometer's white noise integrated over the interval (see _accel_noise).
+# Nothing is drawn per control step: the engine fires in well under 1 % of the steps.
+_DELIVERY, _KNOW_POS, _KNOW_VEL, _ATT_BIAS, _ACC_BIAS, _IMAGES, _SPARES = range(7)
+IMAGE_DRAWS = 18
+# A second ignition within one image interval takes the next spare draw; a run that re-ignites
+# within one interval more than N_SPARES times reuses the spares cyclically, and a third
+# ignition within one interval repeats the second's draw (the laws here fire at most once or
+# twice per interval; the tests count it).
+N_SPARES = 8
+
+
+def image_draws(key: PRNGKeyArray, i) -> Float[Array, "18"]:
+    """The standard normals of image ``i`` of the run with key ``key`` (layout above)."""
+    return jax.random.normal(stream_key(key, _IMAGES, i), (IMAGE_DRAWS,))
+
+
+def run_draws(sim: "ImpactorSimulation", key: PRNGKeyArray) -> dict:
+    """Every standard normal one run uses, by kind: what a peer implementation is fed to
+    reproduce gnc_jax's outcomes run for run (``benchmarks/peers``)."""
+    return dict(
+        delivery=stream_normal(key, _DELIVERY),
+        knowledge_position=stream_normal(key, _KNOW_POS),
+        knowledge_velocity=stream_normal(key, _KNOW_VEL),
+        attitude_bias=stream_normal(key, _ATT_BIAS),
+        accel_bias=stream_normal(key, _ACC_BIAS),
+        spares=stream_normal(key, _SPARES, (N_SPARES, 4)),
+        images=jax.vmap(lambda i: image_draws(key, i))(jnp.arange(sim.n_images)),
+    )
 
 
 def _cross_matrix(a):
@@ -282,7 +337,7 @@ def attitude_bias_covariance(r, v, sigma_bias_rad) -> Float[Array, "6 6"]:
     with an over-confident velocity prior.
     """
     g = -jnp.concatenate([_cross_matrix(r), _cross_matrix(v)])  # d(r, v)/d(delta), 6x3
-    return sigma_bias_rad**2 * g @ g.T
+    return sigma_bias_rad**2 * matmul(g, g.T)
 
 
 def initial_conditions(sim: ImpactorSimulation, key: PRNGKeyArray):
@@ -294,16 +349,16 @@ def initial_conditions(sim: ImpactorSimulation, key: PRNGKeyArray):
     know_vel = err.knowledge_velocity_mps * stream_normal(key, _KNOW_VEL)
     r_true = sim.r0_m + delivery
     truth = ImpactorState(r_true, sim.v0_mps, jnp.asarray(sim.mass_kg, float))
-    x_hat = jnp.concatenate([r_true + c_bi.T @ know_pos, sim.v0_mps + know_vel])
-    p_pos = c_bi.T @ jnp.diag(err.knowledge_position_m**2) @ c_bi
+    x_hat = jnp.concatenate([r_true + matvec3(c_bi.T, know_pos), sim.v0_mps + know_vel])
+    p_pos = matmul(c_bi.T * err.knowledge_position_m**2, c_bi)
     p0 = jax.scipy.linalg.block_diag(p_pos, err.knowledge_velocity_mps**2 * jnp.eye(3))
     p0 = p0 + sim.consider_attitude_bias * attitude_bias_covariance(
         sim.r0_m, sim.v0_mps, err.attitude_bias_rad
     )
     draws = dict(
-        delivery_error_m=c_bi @ delivery,
+        delivery_error_m=matvec3(c_bi, delivery),
         knowledge_position_error_m=know_pos,
-        knowledge_velocity_error_mps=c_bi @ know_vel,
+        knowledge_velocity_error_mps=matvec3(c_bi, know_vel),
         attitude_bias_rad=err.attitude_bias_rad * stream_normal(key, _ATT_BIAS),
         accel_bias_mps2=err.accel_bias_mps2 * stream_normal(key, _ACC_BIAS),
     )
@@ -311,7 +366,7 @@ def initial_conditions(sim: ImpactorSimulation, key: PRNGKeyArray):
 
 
 def take_image(
-    sim: ImpactorSimulation, nav: NavEstimate, r_true: Vector3, attitude_bias_rad, key
+    sim: ImpactorSimulation, nav: NavEstimate, r_true: Vector3, attitude_bias_rad, w, key
 ) -> tuple[NavEstimate, Measurement]:
     """One image and its EKF update (seed 002 §3.2): the updated estimate and the measurement.
 
@@ -319,85 +374,155 @@ def take_image(
     filter interprets the image through its attitude estimate (bias + random error), with the
     image-processing and attitude noise as its measurement noise. The front end
     (``sim.measurement``) sees the truth and the filter's prediction; a rejected image leaves
-    the estimate unchanged.
+    the estimate unchanged. ``w``: the image's standard normals (2 measurement, 3 attitude
+    control, 3 attitude knowledge); ``key``: for front ends that draw more (the renderer).
     """
     err = sim.errors
-    w = jax.random.normal(key, (8,))  # 2 measurement, 3 attitude control, 3 attitude knowledge
     c_cmd = camera_attitude(-nav.r, sim.context.c_bi[2])
-    c_true = small_rotation(err.attitude_control_rad * w[2:5]) @ c_cmd
-    c_est = small_rotation(attitude_bias_rad + err.attitude_noise_rad * w[5:8]) @ c_true
+    c_true = matmul(small_rotation(err.attitude_control_rad * w[2:5]), c_cmd)
+    c_est = matmul(small_rotation(attitude_bias_rad + err.attitude_noise_rad * w[5:8]), c_true)
     sigma = jnp.sqrt(err.image_processing_rad**2 + err.attitude_noise_rad**2)
-    predicted = predict_measurement(nav, los_model(c_est), sigma**2 * jnp.eye(2))
+    predicted = predict_los(nav, c_est, sigma**2 * jnp.eye(2))
     exposure = Exposure(-r_true, c_true, c_est)
-    meas = sim.measurement(exposure, nav, predicted, w[:2], jax.random.fold_in(key, 1))
+    meas = sim.measurement(exposure, nav, predicted, w[:2], key)
     nav, _ = ekf_update(nav, meas.z, predicted, meas.valid)
     return nav, meas
+
+
+def _accel_noise(sigma_dv, moments, u):
+    """The accelerometer's white noise over one image interval, as it reaches the estimate.
+
+    Each control step k adds throttle_k sigma dt n_k (n_k standard normal, independent per axis)
+    to the measured Δv; at the end of the interval that step's noise has moved the estimated
+    velocity by the same amount and the position by that amount times c_k = dt (S - k - 1/2).
+    The sums over the interval are jointly Gaussian per axis with
+    Var V = s^2 A, Cov(V, R) = s^2 B, Var R = s^2 C (s = sigma dt; A, B, C = sums of
+    throttle^2 (1, c_k, c_k^2)), drawn exactly from the two normals ``u`` per axis. The
+    estimate receives it at the end of the interval (before the next image) rather than step
+    by step: the law's decisions within an interval see the accelerometer bias, not its white
+    noise (10 ug: 1e-4 m/s per step, beside the filter's m/s-level velocity errors).
+
+    Returns:
+        ``(dr, dv)``: the position and velocity noise (m, m/s), inertial.
+    """
+    a, b, c = moments[0], moments[1], moments[2]
+    ok = a > 0.0
+    sa = jnp.sqrt(jnp.where(ok, a, 1.0))
+    dv = jnp.where(ok, sigma_dv * sa, 0.0) * u[:3]
+    beta = jnp.where(ok, b / sa, 0.0)
+    gamma = jnp.sqrt(jnp.maximum(jnp.where(ok, c - beta**2, 0.0), 0.0))
+    dr = sigma_dv * (beta * u[:3] + gamma * u[3:])
+    return dr, dv
 
 
 def _control_step(sim: ImpactorSimulation, law, accel_bias, record, carry: _Carry, inputs):
     """One control step: guidance ``step`` -> engine -> RK4 truth -> accelerometer -> EKF mean."""
     ctx, err = sim.context, sim.errors
     dt = ctx.dt_s
-    t, noise = inputs  # noise: 3 accelerometer, 1 magnitude, 2 pointing (standard normal)
-    command, law_state = law.step(carry.law_state, carry.nav, t, ctx)
+    t, c_k = inputs  # c_k: s, weight of this step's Δv in the interval's end position
+    # Once per step, not once per consumer loop (see computed_once).
+    command, law_state = computed_once(
+        lambda s, n: law.step(s, n, t, ctx), t, carry.law_state, carry.nav
+    )
     throttle = command.throttle
     ignition = (throttle > 0.0) & (carry.throttle_prev <= 0.0)
-    fresh = jnp.concatenate(
-        [err.burn_magnitude_frac * noise[3:4], err.attitude_control_rad * noise[4:6]]
+    first = carry.ignitions_image == 0
+    exec_magnitude = jnp.where(
+        ignition,
+        jnp.where(first, carry.first_magnitude, carry.second_magnitude),
+        carry.exec_magnitude,
     )
-    execution_error = jnp.where(ignition, fresh, carry.execution_error)
-    direction = perturb_direction(command.direction, execution_error[1:])
-    thrust = throttle * sim.engine.thrust_n * (1.0 + execution_error[0]) * direction
-    flow = throttle * sim.engine.mass_flow(1.0)
-    truth = propagate(sim.dynamics, carry.truth, thrust, flow, dt, 1)
-    # The accelerometer integrates the non-gravitational Δv while the engine fires.
-    dv_true = thrust * dt / (0.5 * (carry.truth.m + truth.m))
-    dv_meas = dv_true + throttle * (accel_bias + err.accel_noise_mps2 * noise[:3]) * dt
-    nav = propagate_state(carry.nav, dv_meas, dt)
+    exec_pointing = jnp.where(
+        ignition,
+        jnp.where(first, carry.first_pointing, carry.second_pointing),
+        carry.exec_pointing,
+    )
+
+    def engine_and_truth(truth, direction, throttle, exec_magnitude, exec_pointing):
+        direction = tilt_direction(direction, err.attitude_control_rad * exec_pointing)
+        magnitude = sim.engine.thrust_n * (1.0 + err.burn_magnitude_frac * exec_magnitude)
+        thrust = (throttle * magnitude) * direction
+        flow = throttle * sim.engine.mass_flow(1.0)
+        return thrust, rk4(sim.dynamics, truth, thrust, flow, dt)
+
+    thrust, truth = computed_once(
+        engine_and_truth, t, carry.truth, command.direction, throttle, exec_magnitude, exec_pointing
+    )
+    # The accelerometer integrates the non-gravitational Δv while the engine fires; its white
+    # noise reaches the estimate at the end of the interval (_accel_noise).
+    dv_true = thrust * (dt / (0.5 * (carry.truth.m + truth.m)))
+    dv_meas = dv_true + (throttle * dt) * accel_bias
+    # Straight-line mean propagation with the measured Δv applied uniformly (propagate_state).
+    r_hat = carry.r_hat + carry.v_hat * dt + dv_meas * (0.5 * dt)
+    v_hat = carry.v_hat + dv_meas
+    th2 = throttle * throttle
+    ign = ignition.astype(carry.firings.dtype)
     new = carry._replace(
         truth=truth,
-        nav=nav,
+        r_hat=r_hat,
+        v_hat=v_hat,
         law_state=law_state,
         throttle_prev=throttle,
-        execution_error=execution_error,
+        exec_magnitude=exec_magnitude,
+        exec_pointing=exec_pointing,
+        ignitions_image=carry.ignitions_image + ign,
+        spares_used=carry.spares_used + ign * (~first).astype(ign.dtype),
+        accel_moments=carry.accel_moments + jnp.stack([th2, th2 * c_k, th2 * c_k * c_k]),
         dv_mps=carry.dv_mps + safe_norm(dv_true),
-        firings=carry.firings + ignition.astype(carry.firings.dtype),
+        firings=carry.firings + ign,
         burn_time_s=carry.burn_time_s + throttle * dt,
         burn_time_image_s=carry.burn_time_image_s + throttle * dt,
     )
     rec = None
     if record:
-        rec = StepRecord(t, throttle, truth.r, truth.v, nav.r, nav.v, law_state)
+        rec = StepRecord(t, throttle, truth.r, truth.v, r_hat, v_hat, law_state)
     return new, rec
 
 
-def _image_step(sim: ImpactorSimulation, law, key, draws, record, carry: _Carry, i):
+def _image_step(sim: ImpactorSimulation, law, key, draws, spares, record, carry: _Carry, i):
     """One image interval: image -> EKF update -> guidance ``plan`` -> control steps ->
-    covariance propagation."""
+    accelerometer noise -> covariance propagation."""
     ctx, err = sim.context, sim.errors
     dt = ctx.dt_s
+    n = sim.steps_per_image
     t = i * ctx.image_interval_s
     k_img = stream_key(key, _IMAGES, i)
-    nav, meas = take_image(sim, carry.nav, carry.truth.r, draws["attitude_bias_rad"], k_img)
-    law_state = law.plan(carry.law_state, nav, t, ctx)
+    w = computed_once(image_draws, i, key, i)  # drawn once, not in each consumer loop
+    bias = draws["attitude_bias_rad"]
+    k_frame = jax.random.fold_in(k_img, 1)
+
+    def image_and_plan(nav, r_true, law_state, w):
+        nav, meas = take_image(sim, nav, r_true, bias, w[:8], k_frame)
+        return nav, meas, law.plan(law_state, nav, t, ctx)
+
+    nav, meas, law_state = computed_once(
+        image_and_plan, i, carry.nav, carry.truth.r, carry.law_state, w
+    )
     los_error_sq = jnp.where(meas.valid, jnp.sum((meas.z - meas.z_true) ** 2), 0.0)
-    carry = carry._replace(
-        nav=nav,
+    z = jnp.zeros(())
+    spare = spares[carry.spares_used % N_SPARES]
+    carry = carry.with_nav(nav)._replace(
         law_state=law_state,
-        burn_time_image_s=jnp.zeros(()),
+        first_magnitude=w[8],
+        first_pointing=w[9:12],
+        second_magnitude=spare[0],
+        second_pointing=spare[1:],
+        ignitions_image=jnp.zeros_like(carry.ignitions_image),
+        accel_moments=jnp.zeros(3),
+        burn_time_image_s=z,
         los_error_sq=carry.los_error_sq + los_error_sq,
         images_used=carry.images_used + meas.valid.astype(carry.images_used.dtype),
     )
-
-    noise = jax.random.normal(stream_key(key, _STEPS, i), (sim.steps_per_image, 6))
-    ts = t + dt * jnp.arange(sim.steps_per_image)
+    k = jnp.arange(n)
+    inputs = (t + dt * k, dt * (n - k - 0.5))
     step = functools.partial(_control_step, sim, law, draws["accel_bias_mps2"], record)
-    carry, rec = jax.lax.scan(step, carry, (ts, noise))
+    carry, rec = jax.lax.scan(step, carry, inputs)
+    dr, dv = _accel_noise(err.accel_noise_mps2 * dt, carry.accel_moments, w[12:18])
     # Covariance: straight-line growth over the interval plus the accelerometer's Δv error.
     tb = carry.burn_time_image_s
     q_dv = err.accel_noise_mps2**2 * dt * tb + err.accel_bias_mps2**2 * tb**2
-    p = propagate_covariance(carry.nav.p, ctx.image_interval_s, sim.process_noise_m2s3, q_dv)
-    return carry._replace(nav=NavEstimate(carry.nav.x, p)), rec
+    p = propagate_covariance(carry.p, ctx.image_interval_s, sim.process_noise_m2s3, q_dv)
+    return carry._replace(r_hat=carry.r_hat + dr, v_hat=carry.v_hat + dv, p=p), rec
 
 
 def _outcome(sim: ImpactorSimulation, carry: _Carry, draws) -> ImpactorOutcome:
@@ -446,13 +571,26 @@ def simulate(
         ``(outcome, trace)``; ``trace`` is ``None`` unless ``record``.
     """
     truth0, nav0, draws = initial_conditions(sim, key)
+    spares = stream_normal(key, _SPARES, (N_SPARES, 4))
     z = jnp.zeros(())
+    i0 = jnp.zeros((), jnp.int32)
+    z3 = jnp.zeros(3)
     carry0 = _Carry(
         truth=truth0,
-        nav=nav0,
+        r_hat=nav0.r,
+        v_hat=nav0.v,
+        p=nav0.p,
         law_state=law.init(nav0, sim.context),
         throttle_prev=z,
-        execution_error=jnp.zeros(3),
+        exec_magnitude=z,
+        exec_pointing=z3,
+        first_magnitude=z,
+        first_pointing=z3,
+        second_magnitude=z,
+        second_pointing=z3,
+        ignitions_image=i0,
+        spares_used=i0,
+        accel_moments=jnp.zeros(3),
         dv_mps=z,
         firings=jnp.zeros((), jnp.int32),
         burn_time_s=z,
@@ -460,7 +598,7 @@ def simulate(
         los_error_sq=z,
         images_used=jnp.zeros((), jnp.int32),
     )
-    image_step = functools.partial(_image_step, sim, law, key, draws, record)
+    image_step = functools.partial(_image_step, sim, law, key, draws, spares, record)
     carry, rec = jax.lax.scan(image_step, carry0, jnp.arange(sim.n_images))
     outcome = _outcome(sim, carry, draws)
     failures = ((outcome.fuel_kg > sim.propellant_kg, Status.propellant),)
