@@ -29,6 +29,7 @@ from typing import NamedTuple
 import equinox as eqx
 import jax.numpy as jnp
 
+from .._numerics import cross3, dot3, norm3
 from .._types import Scalar, Vector3
 from ..dynamics.intercept import InterceptDynamics
 from ..geometry.los import los_rate
@@ -79,7 +80,7 @@ def los_angle_rate(rho: Vector3, rho_dot: Vector3) -> Scalar:
 
 def closing_speed(rho: Vector3, rho_dot: Vector3) -> Scalar:
     """Closing speed V_c = -d|rho|/dt (seed 004 eq. 8), m/s (positive when closing)."""
-    return -jnp.dot(rho, rho_dot) / jnp.linalg.norm(rho)
+    return -dot3(rho, rho_dot) / norm3(rho)
 
 
 def navigation_coefficient(range_m, range0_m, n0, k, n_min=2.0) -> Scalar:
@@ -95,12 +96,12 @@ def augmented_pn_command(
     A = N (V_c omega x u + A_r_perp / 2): perpendicular to the LOS u = rho/|rho|.
     """
     rho, rho_dot = -nav.r, -nav.v
-    u = rho / jnp.linalg.norm(rho)
+    u = rho / norm3(rho)
     omega = los_rate(rho, rho_dot)
     # A_r: target relative to impactor = minus the impactor's relative gravity (eq. 10).
     a_rel_target = -dynamics.relative_gravity(nav.r_target, nav.r)
-    a_r_perp = a_rel_target - jnp.dot(a_rel_target, u) * u
-    return n * (closing_speed(rho, rho_dot) * jnp.cross(omega, u) + 0.5 * a_r_perp), u
+    a_r_perp = a_rel_target - dot3(a_rel_target, u) * u
+    return n * (closing_speed(rho, rho_dot) * cross3(omega, u) + 0.5 * a_r_perp), u
 
 
 class APNState(NamedTuple):
@@ -182,18 +183,16 @@ class AugmentedPNGuidance(AbstractInterceptGuidance):
 
     def step(self, state: APNState, nav: PNNavigation, t, ctx: PNGuidanceContext):
         """Engine command (throttle = fraction of the step at full thrust, unit direction)."""
-        n = navigation_coefficient(
-            jnp.linalg.norm(nav.r), ctx.range0_m, self.n0, self.k, self.n_min
-        )
+        n = navigation_coefficient(norm3(nav.r), ctx.range0_m, self.n0, self.k, self.n_min)
         a_cmd, u = augmented_pn_command(nav, n, ctx.dynamics)
-        magnitude = jnp.linalg.norm(a_cmd)
+        magnitude = norm3(a_cmd)
         temperature = self.temperature if self.relaxed else None
         on = schmitt_trigger(
             magnitude, state.engine_on, self.a_on_mps2, self.a_off_mps2, temperature
         )
         on = jnp.where(t < ctx.cutoff_time_s, on, 0.0)
-        fallback = jnp.cross(ctx.reference_normal, u)
-        direction = safe_unit(a_cmd, fallback / jnp.linalg.norm(fallback))
+        fallback = cross3(ctx.reference_normal, u)
+        direction = safe_unit(a_cmd, fallback / norm3(fallback))
         return EngineCommand(on * ctx.pulse_fraction, direction), APNState(on, a_cmd, n)
 
 

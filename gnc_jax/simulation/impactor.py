@@ -303,8 +303,15 @@ N_SPARES = 8
 
 
 def image_draws(key: PRNGKeyArray, i) -> Float[Array, "18"]:
-    """The standard normals of image ``i`` of the run with key ``key`` (layout above)."""
-    return jax.random.normal(stream_key(key, _IMAGES, i), (IMAGE_DRAWS,))
+    """The standard normals of image ``i`` of the run with key ``key`` (layout above).
+
+    Drawn in single precision (24-bit uniforms, so the tails end near 5.3 sigma) and used in
+    float64: measured 1.7x cheaper than float64 draws, which were a third of the closed loop's
+    time. The per-run draws (delivery, knowledge, biases), which set the dispersion, stay
+    float64.
+    """
+    w = jax.random.normal(stream_key(key, _IMAGES, i), (IMAGE_DRAWS,), jnp.float32)
+    return w.astype(jnp.float64)
 
 
 def run_draws(sim: "ImpactorSimulation", key: PRNGKeyArray) -> dict:

@@ -30,12 +30,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._numerics import safe_norm
+from .._numerics import computed_once, cross3, dot3, norm3, safe_norm
 from .._random import stream_key, stream_normal
 from .._status import Status
 from .._types import Array, Float, Matrix3, PRNGKeyArray, Scalar, Vector3
 from ..dynamics.impactor import Engine, perturb_direction
-from ..dynamics.intercept import InterceptDynamics, InterceptState, coast_to_b_plane, propagate
+from ..dynamics.intercept import (
+    InterceptDynamics,
+    InterceptState,
+    coast_to_b_plane,
+    vector_field,
+)
 from ..geometry.bplane import b_plane_frame
 from ..geometry.kepler import OrbitalElements, elements_to_state
 from ..guidance.apn import (
@@ -46,15 +51,9 @@ from ..guidance.apn import (
     closing_speed,
     pulse_train_estimate,
 )
+from ..integrate import rk4_step
 from ..navigation.camera import camera_attitude
-from ..navigation.ekf import (
-    NavEstimate,
-    ekf_update,
-    los_model,
-    predict_measurement,
-    propagate_covariance,
-    propagate_state,
-)
+from ..navigation.ekf import NavEstimate, ekf_update, predict_los, propagate_covariance
 from ..navigation.measurements import AbstractMeasurement, Exposure, GaussianLOSMeasurement
 from ..params import from_scenario, param
 from .base import flatten_trace, with_status
@@ -153,20 +152,49 @@ class PNRecord(NamedTuple):
 
 
 class _Carry(NamedTuple):
+    """State of one run between guidance steps (the estimate carried as ``r_hat``, ``v_hat``:
+    see ``simulation.impactor._Carry``)."""
+
     truth: InterceptState
-    nav: NavEstimate
+    r_hat: Vector3
+    v_hat: Vector3
+    p: Float[Array, "6 6"]
     law_state: tuple
     on_prev: Scalar
     direction_prev: Vector3
     pointing_error: Float[Array, "2"]
+    first_pointing: Float[Array, "2"]  # pointing draws of the interval's first ignition
+    second_pointing: Float[Array, "2"]  # ... and of its later ignitions (a spare)
+    ignitions_image: Array  # int
+    spares_used: Array  # int
     dv_mps: Scalar
     firings: Array
     ignitions: Array
     pulses: Array
     last_firing_s: Scalar
 
+    @property
+    def nav(self) -> NavEstimate:
+        return NavEstimate(jnp.concatenate([self.r_hat, self.v_hat]), self.p)
 
-_KNOW_POS, _KNOW_VEL, _IMAGES, _STEPS = range(4)
+    def with_nav(self, nav: NavEstimate) -> "_Carry":
+        return self._replace(r_hat=nav.r, v_hat=nav.v, p=nav.p)
+
+
+# Random streams: once per run the knowledge errors and a table of spare pointing draws; once
+# per image i (stream _IMAGES, index i) four standard normals: [0:2] the LOS measurement noise,
+# [2:4] the pointing error of the interval's first ignition. A later ignition in the same
+# interval takes the next spare (cyclically, N_SPARES); nothing is drawn per guidance step.
+_KNOW_POS, _KNOW_VEL, _IMAGES, _SPARES = range(4)
+IMAGE_DRAWS = 4
+N_SPARES = 8
+
+
+def image_draws(key: PRNGKeyArray, i) -> Float[Array, "4"]:
+    """The standard normals of image ``i`` (single precision, used in float64; see
+    ``simulation.impactor.image_draws``)."""
+    w = jax.random.normal(stream_key(key, _IMAGES, i), (IMAGE_DRAWS,), jnp.float32)
+    return w.astype(jnp.float64)
 
 
 def _initial_nav(sim: PNSimulation, key):
@@ -184,90 +212,113 @@ def _initial_nav(sim: PNSimulation, key):
     return NavEstimate(x_hat, p0), know_pos, know_vel
 
 
-def _control_step(sim: PNSimulation, law: AugmentedPNGuidance, record, carry: _Carry, inputs):
+def _control_step(sim: PNSimulation, law: AugmentedPNGuidance, record, carry: _Carry, t):
     """One guidance step: APN command -> Schmitt trigger -> pulse -> RK4 truth -> EKF mean."""
     ctx, err = sim.context, sim.errors
     dt = ctx.dt_s
     perfect = sim.nav_model == "perfect"
-    t, noise = inputs  # two standard normals: the pointing error of a new firing
     truth = carry.truth
-    nav = NavEstimate(jnp.concatenate([truth.r, truth.v]), carry.nav.p) if perfect else carry.nav
-    navsol = PNNavigation(nav.r, nav.v, truth.r_target)
-    command, law_state = law.step(carry.law_state, navsol, t, ctx)
+    r_hat, v_hat = (truth.r, truth.v) if perfect else (carry.r_hat, carry.v_hat)
+    navsol = PNNavigation(r_hat, v_hat, truth.r_target)
+    # Once per step, not once per consumer loop (see _numerics.computed_once).
+    command, law_state = computed_once(
+        lambda s, n: law.step(s, n, t, ctx), t, carry.law_state, navsol
+    )
     on = law_state.engine_on
     ignition = (on > 0.5) & (carry.on_prev <= 0.5)
-    fresh = err.attitude_rad * noise
+    first = carry.ignitions_image == 0
+    fresh = err.attitude_rad * jnp.where(first, carry.first_pointing, carry.second_pointing)
     pointing = jnp.where(ignition, fresh, carry.pointing_error)
-    if sim.planar:  # rotate within the orbit plane about its normal
-        d = command.direction
-        tilted = d + pointing[0] * jnp.cross(ctx.reference_normal, d)
-        direction = tilted / jnp.linalg.norm(tilted)
-    else:
-        direction = perturb_direction(command.direction, pointing)
-    throttle = command.throttle
-    thrust = throttle * sim.engine.thrust_n * direction
-    new_truth = propagate(sim.dynamics, truth, thrust, throttle * sim.engine.mass_flow(1.0), dt, 1)
-    dv = thrust * dt / (0.5 * (truth.m + new_truth.m))
+
+    def engine_and_truth(truth, d, throttle, pointing):
+        if sim.planar:  # rotate within the orbit plane about its normal
+            tilted = d + pointing[0] * cross3(ctx.reference_normal, d)
+            direction = tilted / norm3(tilted)
+        else:
+            direction = perturb_direction(d, pointing)
+        thrust = throttle * sim.engine.thrust_n * direction
+        flow = throttle * sim.engine.mass_flow(1.0)
+        args = (sim.dynamics, thrust, flow)
+        return direction, thrust, rk4_step(vector_field, 0.0, truth, dt, args)
+
+    direction, thrust, new_truth = computed_once(
+        engine_and_truth, t, truth, command.direction, command.throttle, pointing
+    )
+    dv = thrust * (dt / (0.5 * (truth.m + new_truth.m)))
     if not perfect:
-        # Executed Δv (perfect accelerometer) plus the modelled gravity over the step.
-        g = ctx.dynamics.relative_gravity(truth.r_target, nav.r)
-        nav = propagate_state(nav, dv + g * dt, dt)
+        # Executed Δv (perfect accelerometer) plus the modelled gravity over the step,
+        # straight-line mean propagation (navigation.ekf.propagate_state).
+        g = ctx.dynamics.relative_gravity(truth.r_target, r_hat)
+        dv_nav = dv + g * dt
+        r_hat, v_hat = r_hat + v_hat * dt + dv_nav * (0.5 * dt), v_hat + dv_nav
     fired = on > 0.5
     # A firing is one pulse train of one thruster direction: reversing the thrust (the
     # opposite thrusters) while the trigger stays on starts a new firing.
-    reversal = fired & (carry.on_prev > 0.5) & (jnp.dot(direction, carry.direction_prev) < 0)
-    new = _Carry(
+    reversal = fired & (carry.on_prev > 0.5) & (dot3(direction, carry.direction_prev) < 0)
+    ign = ignition.astype(jnp.int32)
+    new = carry._replace(
         truth=new_truth,
-        nav=nav,
+        r_hat=r_hat,
+        v_hat=v_hat,
         law_state=law_state,
         on_prev=on,
         direction_prev=direction,
         pointing_error=pointing,
+        ignitions_image=carry.ignitions_image + ign,
+        spares_used=carry.spares_used + ign * (~first).astype(jnp.int32),
         dv_mps=carry.dv_mps + safe_norm(dv),
         firings=carry.firings + (ignition | reversal).astype(jnp.int32),
-        ignitions=carry.ignitions + ignition.astype(jnp.int32),
+        ignitions=carry.ignitions + ign,
         pulses=carry.pulses + fired.astype(jnp.int32),
         last_firing_s=jnp.where(fired, t, carry.last_firing_s),
     )
     rec = None
     if record:
         r_m = truth.r
-        rec = PNRecord(
-            t, on, law_state.command_mps2, law_state.coefficient, jnp.linalg.norm(r_m), r_m
-        )
+        rec = PNRecord(t, on, law_state.command_mps2, law_state.coefficient, norm3(r_m), r_m)
     return new, rec
 
 
-def take_image(sim: PNSimulation, nav: NavEstimate, r_true: Vector3, key) -> NavEstimate:
+def take_image(sim: PNSimulation, nav: NavEstimate, r_true: Vector3, w, key) -> NavEstimate:
     """One LOS measurement and its EKF update: the camera points at the estimated target
     direction (x_c = h x boresight lies in the orbit plane), the attitude error is white angle
-    noise of the front end (``sim.measurement``) and the filter's measurement noise."""
-    w = jax.random.normal(key, (2,))
+    noise of the front end (``sim.measurement``) and the filter's measurement noise. ``w``:
+    the image's two measurement normals; ``key``: for front ends that draw more."""
     c_cam = camera_attitude(-nav.r, sim.context.reference_normal)
     sigma = jnp.maximum(sim.errors.attitude_rad, 1e-9)
-    predicted = predict_measurement(nav, los_model(c_cam), sigma**2 * jnp.eye(2))
+    predicted = predict_los(nav, c_cam, sigma**2 * jnp.eye(2))
     meas = sim.measurement(Exposure(-r_true, c_cam, c_cam), nav, predicted, w, key)
     nav, _ = ekf_update(nav, meas.z, predicted, meas.valid)
     return nav
 
 
-def _image_step(sim: PNSimulation, law: AugmentedPNGuidance, key, record, carry: _Carry, i):
+def _image_step(sim: PNSimulation, law: AugmentedPNGuidance, key, spares, record, carry, i):
     """One measurement interval: LOS image -> EKF update -> guidance steps -> covariance."""
     dt = sim.context.dt_s
     perfect = sim.nav_model == "perfect"
     image_dt = dt * sim.steps_per_image
     t = i * image_dt
+    w = computed_once(image_draws, i, key, i)
     if not perfect:
-        carry = carry._replace(
-            nav=take_image(sim, carry.nav, carry.truth.r, stream_key(key, _IMAGES, i))
+        k_img = jax.random.fold_in(stream_key(key, _IMAGES, i), 1)
+        nav = computed_once(
+            lambda nav, r, w: take_image(sim, nav, r, w, k_img), i, carry.nav, carry.truth.r, w[:2]
         )
-    noise = jax.random.normal(stream_key(key, _STEPS, i), (sim.steps_per_image, 2))
-    ts = t + dt * jnp.arange(sim.steps_per_image)
+        carry = carry.with_nav(nav)
+    carry = carry._replace(
+        first_pointing=w[2:4],
+        second_pointing=spares[carry.spares_used % N_SPARES],
+        ignitions_image=jnp.zeros_like(carry.ignitions_image),
+    )
     step = functools.partial(_control_step, sim, law, record)
-    carry, rec = jax.lax.scan(step, carry, (ts, noise))
+    if sim.steps_per_image == 1:  # one step per image: no inner loop (and its carry copies)
+        carry, rec = step(carry, jnp.asarray(t, float))
+        rec = jax.tree_util.tree_map(lambda x: x[None], rec)
+    else:
+        carry, rec = jax.lax.scan(step, carry, t + dt * jnp.arange(sim.steps_per_image))
     if not perfect:
-        p = propagate_covariance(carry.nav.p, image_dt, sim.process_noise_m2s3, 0.0)
-        carry = carry._replace(nav=NavEstimate(carry.nav.x, p))
+        p = propagate_covariance(carry.p, image_dt, sim.process_noise_m2s3, 0.0)
+        carry = carry._replace(p=p)
     return carry, rec
 
 
@@ -283,26 +334,34 @@ def simulate(
         record: also return the guidance-rate :class:`PNRecord` trace (static).
     """
     nav0, know_pos, know_vel = _initial_nav(sim, key)
+    spares = stream_normal(key, _SPARES, (N_SPARES, 2))
     z = jnp.zeros(())
+    i0 = jnp.zeros((), jnp.int32)
     carry0 = _Carry(
         truth=sim.y0,
-        nav=nav0,
+        r_hat=nav0.r,
+        v_hat=nav0.v,
+        p=nav0.p,
         law_state=law.init(None, sim.context),
         on_prev=z,
         direction_prev=jnp.zeros(3),
         pointing_error=jnp.zeros(2),
+        first_pointing=jnp.zeros(2),
+        second_pointing=jnp.zeros(2),
+        ignitions_image=i0,
+        spares_used=i0,
         dv_mps=z,
         firings=jnp.zeros((), jnp.int32),
         ignitions=jnp.zeros((), jnp.int32),
         pulses=jnp.zeros((), jnp.int32),
         last_firing_s=z,
     )
-    image_step = functools.partial(_image_step, sim, law, key, record)
+    image_step = functools.partial(_image_step, sim, law, key, spares, record)
     carry, rec = jax.lax.scan(image_step, carry0, jnp.arange(sim.n_images))
 
     truth = carry.truth
     b, t_rest = coast_to_b_plane(sim.dynamics, truth, sim.c_bi, sim.coast_steps)
-    nav_r = truth.r if sim.nav_model == "perfect" else carry.nav.r
+    nav_r = truth.r if sim.nav_model == "perfect" else carry.r_hat
     outcome = PNOutcome(
         status=jnp.zeros((), jnp.int32),
         miss_m=safe_norm(b),
