@@ -708,6 +708,7 @@ def measure_basilisk(params, runs, floor_runs, repeats=1, quick=False) -> list[d
             per_s=round(n / best, 2),
         )
         row.update(failed=len(failed), **statistics(outs))
+        row["_samples"] = {k: [o[k] for o in outs] for k in ("miss_m", "dv_mps") if k in outs[0]}
         rows.append(row)
     return rows
 
@@ -760,8 +761,25 @@ def _gnc_jax_rows(scenario, runs, big_runs, repeats) -> list[dict]:
             failed=int(np.sum(~ok)),
         )
         row.update(statistics(outs))
+        row["_samples"] = dict(miss_m=out["miss_m"][ok].tolist(), dv_mps=out["dv_mps"][ok].tolist())
         rows.append(row)
     return rows
+
+
+def _same_distribution(rows, ref) -> None:
+    """Two-sample Kolmogorov-Smirnov p-values of each closed-loop row's miss and Δv against
+    gnc_jax's reference sample (``ks_p_miss``, ``ks_p_dv``); drops the per-run samples."""
+    try:
+        from scipy.stats import ks_2samp
+    except ImportError:  # scipy is a test dependency, not a bench one
+        ks_2samp = None
+    reference = ref["_samples"]
+    for r in rows:
+        samples = r.pop("_samples", {})
+        if ks_2samp is None or r is ref or "dv_mps" not in samples:
+            continue
+        for k, col in (("miss_m", "ks_p_miss"), ("dv_mps", "ks_p_dv")):
+            r[col] = round(float(ks_2samp(samples[k], reference[k]).pvalue), 3)
 
 
 def _fmt(x):
@@ -790,6 +808,7 @@ def run(quick: bool = False, runs: int | None = None, repeats: int | None = None
     rows = gj_rows + bsk_rows
     for r in rows:
         r["ratio_gnc_jax"] = round(ref["per_s"] / r["per_s"], 1)
+    _same_distribution(rows, ref)
     best = {
         kind: max((r for r in bsk_rows if r["kind"] == kind), key=lambda r: r["per_s"])
         for kind in ("closed loop", "floor")
@@ -806,6 +825,8 @@ def run(quick: bool = False, runs: int | None = None, repeats: int | None = None
         ("dv_mean_mps", "mean Δv (m/s)"),
         ("firings_mean", "firings mean"),
         ("firings_max", "firings max"),
+        ("ks_p_miss", "KS p miss"),
+        ("ks_p_dv", "KS p Δv"),
     ]
     lines = ["| " + " | ".join(c[1] for c in cols) + " |", "|" + "---|" * len(cols)]
     for r in rows:
@@ -825,7 +846,8 @@ def run(quick: bool = False, runs: int | None = None, repeats: int | None = None
         "forks); wall time includes each run's simulation build, dispersion and outcome, pool "
         "workers warmed first; gnc_jax: best of repeated run_study calls after compilation",
         "same study and error sources in distribution, not run for run (different random "
-        "streams): miss statistics of a few runs differ by sampling",
+        "streams): statistics of a few runs differ by sampling; 'KS p' = two-sample "
+        f"Kolmogorov-Smirnov p-value of the row's miss / Δv against gnc_jax's {ref['runs']} runs",
         "the MC controller with a RetentionPolicy sleeps 1 s per run in its workers (Basilisk's "
         "Controller: time.sleep(1) after queueing retained data) and starts a new process pool "
         "for every batch of 2 runs; the 'execution fn saves' rows avoid the sleep",
