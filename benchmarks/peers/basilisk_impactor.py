@@ -788,21 +788,31 @@ def _fmt(x):
     return str(x)
 
 
-def run(quick: bool = False, runs: int | None = None, repeats: int | None = None) -> dict:
-    """Throughput and miss statistics of the Basilisk peer beside gnc_jax (suite interface)."""
+def run(
+    quick: bool = False,
+    runs: int | None = None,
+    repeats: int | None = None,
+    bsk_repeats: int = 1,
+) -> dict:
+    """Throughput and miss statistics of the Basilisk peer beside gnc_jax (suite interface).
+
+    ``runs`` closed-loop runs per Basilisk row (8 quick, 100 full; the floor rows 4x as many
+    in full), ``repeats`` timed gnc_jax calls per size, ``bsk_repeats`` passes per Basilisk row
+    (best kept).
+    """
     title = "Basilisk peer: deep-impact-los closed loop and framework floor (2 cores)"
     if BASILISK_ERROR is not None:
         note = f"Basilisk (package bsk) could not be imported: {BASILISK_ERROR}"
         return dict(title=title, rows=[], markdown=note, notes=[note])
     import gnc_jax as gj
 
-    runs = runs or (8 if quick else 120)
+    runs = runs or (8 if quick else 100)
     floor_runs = runs if quick else 4 * runs
     big_runs = 256 if quick else 2000
     repeats = repeats if repeats is not None else (2 if quick else 3)
     scenario = gj.load_scenario(SCENARIO)
     params = scenario_params(scenario.config)
-    bsk_rows = _measure_in_subprocess(params, runs, floor_runs, 1, quick)
+    bsk_rows = _measure_in_subprocess(params, runs, floor_runs, bsk_repeats, quick)
     gj_rows = _gnc_jax_rows(scenario, runs, big_runs, repeats)
     ref = max(gj_rows, key=lambda r: r["runs"])
     rows = gj_rows + bsk_rows
@@ -839,12 +849,14 @@ def run(quick: bool = False, runs: int | None = None, repeats: int | None = None
         f"{best['closed loop']['ratio_gnc_jax']:.0f}x (issue #18 asks >= 300x); / Basilisk "
         f"framework floor ({best['floor']['name']}): {best['floor']['ratio_gnc_jax']:.0f}x "
         "(asks >= 60x)",
+        _per_step_note(best, params),
         f"machine: {platform.machine()}, {os.cpu_count()} cores, "
         f"Python {platform.python_version()}, bsk {_bsk_version()}; every row uses both cores "
         "(2 worker processes / 2 XLA devices)",
-        "Basilisk rows: one pass each, in a separate interpreter without JAX (the controller "
-        "forks); wall time includes each run's simulation build, dispersion and outcome, pool "
-        "workers warmed first; gnc_jax: best of repeated run_study calls after compilation",
+        f"Basilisk rows: best of {bsk_repeats} pass(es), in a separate interpreter without "
+        "JAX (the controller forks); wall time includes each run's simulation build, "
+        "dispersion and outcome, pool workers warmed first; gnc_jax: best of repeated "
+        "run_study calls after compilation",
         "same study and error sources in distribution, not run for run (different random "
         "streams): statistics of a few runs differ by sampling; 'KS p' = two-sample "
         f"Kolmogorov-Smirnov p-value of the row's miss / Δv against gnc_jax's {ref['runs']} runs",
@@ -855,6 +867,19 @@ def run(quick: bool = False, runs: int | None = None, repeats: int | None = None
         "acceleration by the end of the burns; mapping in the module docstring",
     ]
     return dict(title=title, rows=rows, markdown="\n".join(lines), notes=notes)
+
+
+def _per_step_note(best, params) -> str:
+    """Where a Basilisk run's time goes: core time per run of the floor and of the closed
+    loop (both cores busy), and what the Python module adds per 1 s control step."""
+    steps = stop_time_s(params) / params["dt_s"]
+    floor_s = 2.0 / best["floor"]["per_s"]
+    loop_s = 2.0 / best["closed loop"]["per_s"]
+    return (
+        f"per run and core: framework floor {floor_s:.3f} s ({1e6 * floor_s / steps:.1f} us per "
+        f"1 s step: build, scheduler, spacecraft, gravity, RK4), closed loop {loop_s:.3f} s; the "
+        f"Python GNC module adds {1e6 * (loop_s - floor_s) / steps:.0f} us per step"
+    )
 
 
 def _bsk_version() -> str:
@@ -870,7 +895,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small sizes (~1 min)")
     ap.add_argument("--runs", type=int, default=None, help="closed-loop runs per Basilisk row")
-    ap.add_argument("--repeats", type=int, default=None)
+    ap.add_argument("--repeats", type=int, default=None, help="timed gnc_jax calls per size")
+    ap.add_argument("--bsk-repeats", type=int, default=1, help="passes per Basilisk row")
     ap.add_argument("--worker", nargs=2, metavar=("IN", "OUT"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker:
@@ -882,7 +908,7 @@ def main(argv=None):
         with open(args.worker[1], "w") as f:
             json.dump(rows, f)
         return
-    res = run(quick=args.quick, runs=args.runs, repeats=args.repeats)
+    res = run(args.quick, args.runs, args.repeats, args.bsk_repeats)
     print(f"## {res['title']}\n\n{res['markdown']}\n")
     for n in res["notes"]:
         print(f"- {n}")
