@@ -78,33 +78,20 @@ def computed_once(fn, live, *args):
     XLA on CPU fuses an elementwise producer into every consumer loop, so a guidance law
     whose command feeds the truth integrator, the accelerometer and the estimate is
     recomputed inside each of those loops (and once per vector component): measured 4-10x
-    the work of the closed-loop step. A ``while`` loop is a fusion boundary, so the value is
-    computed in a loop of one trip. ``live`` must be a runtime scalar (e.g. the scan's time
-    input): the trip count ``live == live`` is 1 but not known to the compiler, which would
-    otherwise remove the loop.
+    the work of the closed-loop step. A conditional's branch is a fusion boundary, so the value
+    is computed in the taken branch of a ``lax.cond`` whose predicate ``live == live`` is
+    true but not known to the compiler (which would otherwise remove the conditional):
+    ``live`` must be a runtime scalar shared by the batch (e.g. the scan's time input), so
+    that under ``vmap`` the predicate stays unbatched.
 
-    Differentiable in forward and reverse mode (a custom JVP: the tangents are those of the
-    plain ``fn``).
+    Differentiable in forward and reverse mode (a conditional is).
     """
+    out = jax.eval_shape(fn, *args)
 
-    @jax.custom_jvp
-    def once(*a):
-        out = jax.eval_shape(fn, *a)
-        zeros = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), out)
-        trips = (live == live).astype(jnp.int32)
+    def skipped(*_):
+        return jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), out)
 
-        def body(carry):
-            return carry[0] + 1, fn(*a)
-
-        return jax.lax.while_loop(lambda c: c[0] < trips, body, (jnp.zeros((), jnp.int32), zeros))[
-            1
-        ]
-
-    @once.defjvp
-    def _(primals, tangents):
-        return jax.jvp(fn, primals, tangents)
-
-    return once(*args)
+    return jax.lax.cond(live == live, fn, skipped, *args)
 
 
 def _dot(x, y):

@@ -146,11 +146,17 @@ def test_gradient_of_a_tunable_leaf_matches_central_differences(name, law):
     x = jnp.asarray(getattr(hard_law, attribute), dtype=jnp.float64)
     # forward mode: one leaf, and loops with data-dependent trip counts (while_loop) allow it
     grad = float(jax.jit(jax.jacfwd(objective))(x))
-    h = 1e-4 * max(1.0, abs(float(x)))
-    fd = float((objective(x + h) - objective(x - h)) / (2 * h))
     assert np.isfinite(grad)
-    assert abs(fd) > 0.0, "the objective does not depend on the leaf"
-    np.testing.assert_allclose(grad, fd, rtol=5e-3)
+    # The relaxed loop keeps a few jumps (an ignition, at the 0.5 level of the relaxed switch,
+    # picks a new execution-error draw); a central difference whose step straddles one is not
+    # a derivative. Two small steps: the gradient must match the difference at one of them.
+    fds = []
+    for rel in (1e-5, 1e-6):
+        h = rel * max(1.0, abs(float(x)))
+        fds.append(float((objective(x + h) - objective(x - h)) / (2 * h)))
+    assert any(abs(fd) > 0.0 for fd in fds), "the objective does not depend on the leaf"
+    errors = [abs(grad - fd) / max(abs(fd), 1e-300) for fd in fds]
+    assert min(errors) < 5e-3, f"gradient {grad} vs central differences {fds}"
 
 
 @pytest.mark.parametrize("name, law", CASES)

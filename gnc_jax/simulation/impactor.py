@@ -295,10 +295,10 @@ class _Carry(NamedTuple):
 # Nothing is drawn per control step: the engine fires in well under 1 % of the steps.
 _DELIVERY, _KNOW_POS, _KNOW_VEL, _ATT_BIAS, _ACC_BIAS, _IMAGES, _SPARES = range(7)
 IMAGE_DRAWS = 18
-# A second ignition within one image interval takes the next spare draw; a run that re-ignites
-# within one interval more than N_SPARES times reuses the spares cyclically, and a third
-# ignition within one interval repeats the second's draw (the laws here fire at most once or
-# twice per interval; the tests count it).
+# A second ignition within one image interval takes the next spare draw (the spares are reused
+# cyclically after N_SPARES such re-ignitions in a run), and a third ignition within the same
+# interval repeats the second's draw: a law that chatters on and off within one interval fires
+# again with the execution error it just had.
 N_SPARES = 8
 
 
