@@ -24,16 +24,18 @@ Two ways to feed it random numbers:
   (delivery, knowledge, attitude and accelerometer biases), 8 per image (image processing,
   attitude control, attitude knowledge), 4 per ignition (burn magnitude, pointing) and 6 per
   image interval in which the engine fired (the accelerometer's white noise integrated over the
-  interval). Same distributions as gnc_jax's layout; gnc_jax's ignition draws are the image's
-  for the first ignition of an interval and a cyclic table of 8 spares for later ones, here
-  every ignition draws afresh.
+  interval). Same distributions as gnc_jax's layout, in float64 (gnc_jax draws its per-image
+  normals in single precision); gnc_jax's ignition draws are the image's for the first
+  ignition of an interval and a cyclic table of 8 spares for later ones, here every ignition
+  draws afresh.
 
 The benchmark times both against gnc_jax's ``run_study`` and its sharded batch function (as
 ``benchmarks/impactor.py`` times it) in the same process, and profiles the kernel by switching
 its image updates and its control steps off.
 """
 
-# numba's nopython mode draws per thread from the legacy np.random functions only.
+# numba's per-thread generator is reached through the legacy np.random functions (a numpy
+# Generator can only be passed in, one state shared by every thread).
 # ruff: noqa: NPY002
 
 import argparse
