@@ -765,11 +765,23 @@ def _best(fn, repeats):
     return best
 
 
-def _gnc_jax_batch(scenario, n, repeats):
-    """Compile and time gnc_jax's sharded vmapped batch of runs 0..n-1, as
-    ``benchmarks/impactor.py`` does (``_timing.time_batch``). Returns ``(compile_s, run_s)``."""
+def _gnc_jax_timers(scenario, n, batch=True):
+    """Timers (each returns one wall, s) of gnc_jax's study of runs 0..n-1: ``run_study`` as a
+    user calls it (its executable is cached, so a repeat does not recompile) and one sharded
+    vmapped call of all runs, as ``benchmarks/impactor.py`` times it (``_timing.time_batch``).
+    Also returns the study (its compile time) and the batch's compile time. ``batch=False``:
+    no batch timer (None)."""
     from gnc_jax.montecarlo import batch_function
 
+    study = gj.run_study(scenario, runs=n, seed=0, progress=False)  # compiles
+
+    def study_wall():
+        c0 = time.process_time()
+        wall = gj.run_study(scenario, runs=n, seed=0, progress=False).summary()["wall_s"]
+        return wall, time.process_time() - c0
+
+    if not batch:
+        return study_wall, None, study, None
     system = gj.get_system(scenario.kind)
     sim, law = gj.build(scenario)
     fn, n_dev = batch_function(system)
@@ -777,9 +789,15 @@ def _gnc_jax_batch(scenario, n, repeats):
     seed, idx = jnp.asarray(0, jnp.uint32), jnp.arange(n_pad)
     t0 = time.perf_counter()
     compiled = fn.lower(sim, law, seed, idx).compile()
-    compile_s = time.perf_counter() - t0
+    batch_compile_s = time.perf_counter() - t0
     jax.block_until_ready(compiled(sim, law, seed, idx))
-    return compile_s, _best(lambda: compiled(sim, law, seed, idx), repeats)
+
+    def batch_wall():
+        t0, c0 = time.perf_counter(), time.process_time()
+        jax.block_until_ready(compiled(sim, law, seed, idx))
+        return time.perf_counter() - t0, time.process_time() - c0
+
+    return study_wall, batch_wall, study, batch_compile_s
 
 
 def _numpy_draws(n, n_images, rng):
@@ -790,37 +808,60 @@ def _numpy_draws(n, n_images, rng):
     )
 
 
-def _fed_timing(scenario, n, repeats, chunk):
-    """Kernel wall (best of ``repeats``, summed over chunks of at most ``chunk`` runs: the fed
-    normals of 10,000 runs are 0.7 GB) and the draw times of gnc_jax's ``run_draws`` (jitted,
-    vmapped, sharded by nothing: one call per chunk) and of numpy's generator."""
+def _fed_timer(scenario, n, chunk):
+    """Timer of the fed kernel over runs 0..n-1 in chunks of at most ``chunk`` runs (the
+    normals of 10,000 runs are 0.7 GB): returns the kernel wall summed over the chunks and,
+    apart, the walls of making the same normals with gnc_jax's ``run_draws`` (jitted, vmapped,
+    one call per chunk) and with numpy's generator."""
     prm, c_bi, p0, n_images, steps, coast = problem(scenario)
-    kernel_s = jax_draw_s = numpy_draw_s = 0.0
-    rng = np.random.default_rng(0)
-    out = np.empty((min(n, chunk), N_OUT))
     sim, _ = gj.build(scenario)
+    out = np.empty((min(n, chunk), N_OUT))
+    rng = np.random.default_rng(0)
     gnc_jax_draws(sim, min(n, chunk))  # compile the draw function
-    for start in range(0, n, chunk):
-        m = min(chunk, n - start)
-        t0 = time.perf_counter()
-        fixed, spares, images = gnc_jax_draws(sim, m, seed=0, start=start)
-        jax_draw_s += time.perf_counter() - t0
-        t0 = time.perf_counter()
-        _numpy_draws(m, n_images, rng)
-        numpy_draw_s += time.perf_counter() - t0
-        o = out[:m]
-        args = (prm, c_bi, p0, n_images, steps, coast, fixed, spares, images, True, True, o)
-        kernel_s += _best(lambda args=args: simulate_fed(*args), repeats)
-    return kernel_s, jax_draw_s, numpy_draw_s
+
+    def timer():
+        kernel_s = kernel_cpu_s = jax_draw_s = numpy_draw_s = 0.0
+        for start in range(0, n, chunk):
+            m = min(chunk, n - start)
+            t0 = time.perf_counter()
+            fixed, spares, images = gnc_jax_draws(sim, m, seed=0, start=start)
+            jax_draw_s += time.perf_counter() - t0
+            t0 = time.perf_counter()
+            _numpy_draws(m, n_images, rng)
+            numpy_draw_s += time.perf_counter() - t0
+            t0, c0 = time.perf_counter(), time.process_time()
+            simulate_fed(
+                prm, c_bi, p0, n_images, steps, coast, fixed, spares, images, True, True, out[:m]
+            )
+            kernel_s += time.perf_counter() - t0
+            kernel_cpu_s += time.process_time() - c0
+        return kernel_s, kernel_cpu_s, jax_draw_s, numpy_draw_s
+
+    return timer
 
 
-def _own_timing(scenario, n, repeats, do_images=True, do_steps=True):
+def _own_timer(scenario, n, do_images=True, do_steps=True):
     prm, c_bi, p0, n_images, steps, coast = problem(scenario)
     out = np.empty((n, N_OUT))
-    return _best(
-        lambda: simulate_own(prm, c_bi, p0, n_images, steps, coast, 0, do_images, do_steps, out),
-        repeats,
-    )
+
+    def timer():
+        t0, c0 = time.perf_counter(), time.process_time()
+        simulate_own(prm, c_bi, p0, n_images, steps, coast, 0, do_images, do_steps, out)
+        return time.perf_counter() - t0, time.process_time() - c0
+
+    return timer
+
+
+def _interleaved_best(timers, repeats):
+    """Best (smallest) result of each timer over ``repeats`` rounds, the timers taking turns
+    within a round so that a change of the machine's load reaches them alike. A timer returning
+    a tuple is minimised component by component."""
+    best = {}
+    for _ in range(repeats):
+        for name, timer in timers.items():
+            value = np.atleast_1d(timer())
+            best[name] = np.minimum(best.get(name, value), value)
+    return {k: (tuple(float(x) for x in v) if len(v) > 1 else float(v[0])) for k, v in best.items()}
 
 
 def _profile(scenario, n, repeats):
@@ -841,7 +882,8 @@ def _profile(scenario, n, repeats):
         fed(False, True),
         fed(False, False),
     )
-    own = _own_timing(scenario, n, repeats)
+    own_timer = _own_timer(scenario, n)
+    own = min(own_timer()[0] for _ in range(repeats))
     parts = (
         ("control steps (law, engine, RK4, estimate)", control - neither),
         ("image updates (camera, EKF, plan, covariance)", images - neither),
@@ -927,14 +969,15 @@ def _cold_compile_s():
 
 
 def _markdown(rows):
-    cols = ["name", "runs", "wall_s", "per_s", "ratio_gnc_jax_vs_this", "compile_s", "note"]
+    cols = ["name", "runs", "wall_s", "per_s", "cpu_us_per_run", "ratio_gnc_jax_vs_this"]
+    cols += ["compile_s", "note"]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for r in rows:
         cells = []
         for c in cols:
             v = r.get(c, "")
             if isinstance(v, float):
-                v = f"{v:,.0f}" if c == "per_s" else f"{v:.3g}"
+                v = f"{v:,.0f}" if c in ("per_s", "cpu_us_per_run") else f"{v:.3g}"
             cells.append(str(v))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
@@ -968,42 +1011,47 @@ def run(quick: bool = False, sizes=None, repeats: int | None = None) -> dict:
         rows.append(row)
 
     for n in sizes:
-        # run_study as a user calls it; its executable is cached, so repeats do not recompile.
-        studies = [gj.run_study(scenario, runs=n, seed=0, progress=False) for _ in range(repeats)]
-        s = min((st.summary() for st in studies), key=lambda x: x["wall_s"])
-        machine = s["machine"]
-        gj_rate = n / s["wall_s"]
+        # quick: one chunk, so run_study times the same executable as the batch function.
+        study_wall, batch_wall, study, batch_compile_s = _gnc_jax_timers(scenario, n, not quick)
+        timers = {"study": study_wall, "batch": batch_wall}
+        timers.update(fed=_fed_timer(scenario, n, chunk), own=_own_timer(scenario, n))
+        best = _interleaved_best({k: v for k, v in timers.items() if v is not None}, repeats)
+        machine = study.summary()["machine"]
+        gj_rate = n / best["study"][0]
         rows.append(
             dict(
                 name="gnc_jax run_study",
                 runs=n,
-                wall_s=s["wall_s"],
+                wall_s=best["study"][0],
                 per_s=gj_rate,
-                compile_s=studies[0].summary()["compile_s"],
-                devices=studies[0].n_devices,
-                note=f"chunks of {studies[0].chunk_size}, best of {repeats}",
+                cpu_us_per_run=1e6 * best["study"][1] / n,
+                compile_s=study.compile_s,
+                devices=study.n_devices,
+                note=f"chunks of {study.chunk_size}",
             )
         )
-        b_compile, b_wall = _gnc_jax_batch(scenario, n, repeats)
-        rows.append(
-            dict(
-                name="gnc_jax batch_function",
-                runs=n,
-                wall_s=b_wall,
-                per_s=n / b_wall,
-                compile_s=b_compile,
-                note="one sharded call of all runs, as benchmarks/impactor.py",
+        if "batch" in best:
+            rows.append(
+                dict(
+                    name="gnc_jax batch_function",
+                    runs=n,
+                    wall_s=best["batch"][0],
+                    per_s=n / best["batch"][0],
+                    cpu_us_per_run=1e6 * best["batch"][1] / n,
+                    compile_s=batch_compile_s,
+                    note="one sharded call of all runs, as benchmarks/impactor.py",
+                )
             )
-        )
-        kernel_s, jax_draw_s, np_draw_s = _fed_timing(scenario, n, repeats, chunk)
+        batch_s = best["batch"][0] if "batch" in best else None
+        kernel_s, kernel_cpu_s, jax_draw_s, np_draw_s = best["fed"]
         rows.append(
             dict(
                 name="numba fed (gnc_jax's normals)",
                 runs=n,
                 wall_s=kernel_s,
                 per_s=n / kernel_s,
+                cpu_us_per_run=1e6 * kernel_cpu_s / n,
                 ratio_gnc_jax_vs_this=gj_rate / (n / kernel_s),
-                ratio_gnc_jax_batch_vs_this=kernel_s / b_wall,
                 draw_s_run_draws=jax_draw_s,
                 draw_s_numpy=np_draw_s,
                 per_s_with_numpy_draws=n / (kernel_s + np_draw_s),
@@ -1015,19 +1063,23 @@ def run(quick: bool = False, sizes=None, repeats: int | None = None) -> dict:
                 ),
             )
         )
-        own_s = _own_timing(scenario, n, repeats)
+        if batch_s is not None:
+            rows[-1]["ratio_gnc_jax_batch_vs_this"] = kernel_s / batch_s
+        own_s, own_cpu_s = best["own"]
         rows.append(
             dict(
                 name="numba own draws",
                 runs=n,
                 wall_s=own_s,
                 per_s=n / own_s,
+                cpu_us_per_run=1e6 * own_cpu_s / n,
                 ratio_gnc_jax_vs_this=gj_rate / (n / own_s),
-                ratio_gnc_jax_batch_vs_this=own_s / b_wall,
                 threads=threads,
                 note="np.random.standard_normal in the kernel, only what is used",
             )
         )
+        if batch_s is not None:
+            rows[-1]["ratio_gnc_jax_batch_vs_this"] = own_s / batch_s
 
     rows += _profile(scenario, min(sizes[0], chunk), repeats)
 
@@ -1047,6 +1099,10 @@ def run(quick: bool = False, sizes=None, repeats: int | None = None) -> dict:
         f"run; numba {numba.__version__} with {threads} threads "
         f"(layer {numba.threading_layer()}); jax {jax.__version__} with {len(jax.devices())} "
         f"host devices; {platform.processor() or platform.machine()}, {os.cpu_count()} cores.",
+        f"Every wall is the best of {repeats} rounds in which gnc_jax and the numba kernels take "
+        "turns (compile times apart).",
+        "cpu_us_per_run: the process's CPU time (all threads) per run in the same calls, less "
+        "sensitive than the wall to other processes on the machine.",
         "ratio_gnc_jax_vs_this = gnc_jax run_study throughput / the numba row's throughput "
         "(>= 1: gnc_jax is faster); ratio_gnc_jax_batch_vs_this the same with gnc_jax's "
         "single sharded batch call.",
