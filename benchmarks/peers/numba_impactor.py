@@ -755,16 +755,6 @@ def run_own(scenario, runs, seed=0, do_images=True, do_steps=True):
 # Benchmark
 
 
-def _best(fn, repeats):
-    """Smallest wall time (s) of ``repeats`` calls (JAX outputs waited for)."""
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        jax.block_until_ready(fn())
-        best = min(best, time.perf_counter() - t0)
-    return best
-
-
 def _gnc_jax_timers(scenario, n, batch=True):
     """Timers (each returns one wall, s) of gnc_jax's study of runs 0..n-1: ``run_study`` as a
     user calls it (its executable is cached, so a repeat does not recompile) and one sharded
@@ -866,39 +856,47 @@ def _interleaved_best(timers, repeats):
 
 def _profile(scenario, n, repeats):
     """Where the kernel's time goes, by switching its parts off (fed gnc_jax's normals, so no
-    generator cost) and by the difference of the own-draws and fed kernels."""
+    generator cost) and by the difference of the own-draws and fed kernels; in CPU time per
+    run (the variants take turns, best of ``repeats``)."""
     prm, c_bi, p0, n_images, steps, coast = problem(scenario)
     sim, _ = gj.build(scenario)
     draws = gnc_jax_draws(sim, n)
     out = np.empty((n, N_OUT))
 
     def fed(do_images, do_steps):
-        args = (prm, c_bi, p0, n_images, steps, coast, *draws, do_images, do_steps, out)
-        return _best(lambda: simulate_fed(*args), repeats)
+        def timer():
+            t0, c0 = time.perf_counter(), time.process_time()
+            simulate_fed(prm, c_bi, p0, n_images, steps, coast, *draws, do_images, do_steps, out)
+            return time.perf_counter() - t0, time.process_time() - c0
 
-    full, images, control, neither = (
-        fed(True, True),
-        fed(True, False),
-        fed(False, True),
-        fed(False, False),
+        return timer
+
+    best = _interleaved_best(
+        {
+            "full": fed(True, True),
+            "images": fed(True, False),
+            "control": fed(False, True),
+            "neither": fed(False, False),
+            "own": _own_timer(scenario, n),
+        },
+        repeats,
     )
-    own_timer = _own_timer(scenario, n)
-    own = min(own_timer()[0] for _ in range(repeats))
+    cpu = {k: 1e6 * v[1] / n for k, v in best.items()}  # us per run
     parts = (
-        ("control steps (law, engine, RK4, estimate)", control - neither),
-        ("image updates (camera, EKF, plan, covariance)", images - neither),
-        ("initial state, coast, outcome", neither),
-        ("in-kernel normals (own - fed)", own - full),
+        ("control steps (law, engine, RK4, estimate)", cpu["control"] - cpu["neither"]),
+        ("image updates (camera, EKF, plan, covariance)", cpu["images"] - cpu["neither"]),
+        ("initial state, coast, outcome", cpu["neither"]),
+        ("in-kernel normals (own - fed)", cpu["own"] - cpu["full"]),
     )
     return [
         dict(
             name=f"numba profile: {name}",
             runs=n,
-            wall_s=wall,
-            fraction_of_own=wall / own,
-            note=f"{100 * wall / own:.0f} % of the own-draws kernel",
+            cpu_us_per_run=us,
+            fraction_of_own=us / cpu["own"],
+            note=f"{100 * us / cpu['own']:.0f} % of the own-draws kernel's CPU time",
         )
-        for name, wall in parts
+        for name, us in parts
     ]
 
 
@@ -1113,11 +1111,11 @@ def run(quick: bool = False, sizes=None, repeats: int | None = None) -> dict:
         "numba own draws: per-thread Mersenne twister seeded seed + i per run; 8 normals per "
         "image, 4 per ignition, 6 per image interval with a burn, 15 per run. Statistically "
         "equal to gnc_jax (KS test in tests/test_peer_numba.py).",
-        "Profile rows: the fed kernel with its image updates or its control steps switched "
-        "off, each minus the kernel with both off; the normals' cost is the own-draws kernel "
-        "minus the fed one. With the control steps off the truth does not move; with the images "
-        "off the law keeps its initial sigma_B and fires differently: the rows say where the "
-        "time goes, not what a run costs.",
+        "Profile rows (CPU time per run): the fed kernel with its image updates or its control "
+        "steps switched off, each minus the kernel with both off; the normals' cost is the "
+        "own-draws kernel minus the fed one. With the control steps off the truth does not "
+        "move; with the images off the law keeps its initial sigma_B and fires differently: the "
+        "rows say where the time goes, not what a run costs.",
     ]
     return {"title": title, "rows": rows, "markdown": _markdown(rows), "notes": notes}
 
