@@ -80,9 +80,8 @@ def profile(name, repeats, max_steps=None):
     sim, law = gj.build(scenario)
     if max_steps and sim.n_images * sim.steps_per_image > max_steps:  # long loops: a prefix
         sim = dataclasses.replace(sim, n_images=max_steps // sim.steps_per_image)
-    bare, n = (
-        _impactor_bare if scenario.config["scenario"]["kind"] == "impactor" else _intercept_bare
-    )(sim)
+    impactor = scenario.kind == "impactor"
+    bare, n = (_impactor_bare if impactor else _intercept_bare)(sim)
     steps_only = dataclasses.replace(sim, n_images=1, steps_per_image=n)
     b = PROFILE_BATCH
     keys = jax.vmap(lambda i: gj.run_key(0, i))(jnp.arange(b))
