@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._numerics import computed_once, cross3, dot3, norm3, safe_norm
+from .._numerics import computed_once, cross3, dot3, matmul, matvec3, norm3, safe_norm
 from .._random import stream_key, stream_normal
 from .._status import Status
 from .._types import Array, Float, Matrix3, PRNGKeyArray, Scalar, Vector3
@@ -53,7 +53,15 @@ from ..guidance.apn import (
 )
 from ..integrate import rk4_step
 from ..navigation.camera import camera_attitude
-from ..navigation.ekf import NavEstimate, ekf_update, predict_los, propagate_covariance
+from ..navigation.ekf import MeasurementPrediction, NavEstimate
+from ..navigation.packed_ekf import (
+    PackedCovariance,
+    apply_gain,
+    los_gain,
+    pack,
+    propagate_packed,
+    unpack,
+)
 from ..navigation.measurements import AbstractMeasurement, Exposure, GaussianLOSMeasurement
 from ..params import from_scenario, param
 from .base import flatten_trace, with_status
@@ -158,7 +166,7 @@ class _Carry(NamedTuple):
     truth: InterceptState
     r_hat: Vector3
     v_hat: Vector3
-    p: Float[Array, "6 6"]
+    p: PackedCovariance  # the 21 unique entries of the 6x6 covariance
     law_state: tuple
     on_prev: Scalar
     direction_prev: Vector3
@@ -175,26 +183,49 @@ class _Carry(NamedTuple):
 
     @property
     def nav(self) -> NavEstimate:
-        return NavEstimate(jnp.concatenate([self.r_hat, self.v_hat]), self.p)
-
-    def with_nav(self, nav: NavEstimate) -> "_Carry":
-        return self._replace(r_hat=nav.r, v_hat=nav.v, p=nav.p)
+        return NavEstimate(jnp.concatenate([self.r_hat, self.v_hat]), unpack(self.p))
 
 
 # Random streams: once per run the knowledge errors and a table of spare pointing draws; once
-# per image i (stream _IMAGES, index i) four standard normals: [0:2] the LOS measurement noise,
-# [2:4] the pointing error of the interval's first ignition. A later ignition in the same
-# interval takes the next spare (cyclically, N_SPARES); nothing is drawn per guidance step.
-_KNOW_POS, _KNOW_VEL, _IMAGES, _SPARES = range(4)
-IMAGE_DRAWS = 4
+# per block of DRAW_BLOCK images (stream _IMAGES, index = block) the normals of its images, one
+# row per kind of draw and one column per image: the LOS measurement noise (in-plane angle, and
+# the out-of-plane one in 3-D) and the pointing error of the interval's first ignition (one
+# angle about the orbit normal when planar, two in 3-D). A later ignition in the same interval
+# takes the next spare (cyclically, N_SPARES); nothing is drawn per guidance step. A block, not
+# an image, per draw: jax's threefry hash runs as a five-trip loop on CPU, whose fixed cost per
+# call is then shared by DRAW_BLOCK images.
+_KNOW_POS, _KNOW_VEL, _IMAGES, _SPARES, _FRONT_END = range(5)
+DRAW_BLOCK = 64
 N_SPARES = 8
 
 
-def image_draws(key: PRNGKeyArray, i) -> Float[Array, "4"]:
-    """The standard normals of image ``i`` (single precision, used in float64; see
-    ``simulation.impactor.image_draws``)."""
-    w = jax.random.normal(stream_key(key, _IMAGES, i), (IMAGE_DRAWS,), jnp.float32)
-    return w.astype(jnp.float64)
+class ImageDraws(NamedTuple):
+    """Standard normals of one image (float32 draws: 24-bit normals are ample for an error
+    source; see ``simulation.impactor.image_draws``)."""
+
+    measurement: Float[Array, "2"]  # LOS angle noise (out-of-plane angle: 0 when planar)
+    pointing: Float[Array, "2"]  # first ignition's pointing angles (second: 0 when planar)
+
+
+def draw_rows(planar: bool) -> int:
+    """Normals per image: planar runs draw only the in-plane measurement and pointing angle."""
+    return 2 if planar else 4
+
+
+def block_draws(key: PRNGKeyArray, block, planar: bool) -> Float[Array, "rows block"]:
+    """The normals of images ``block * DRAW_BLOCK + j``, j < DRAW_BLOCK: column j, rows as
+    :func:`image_draws_of` reads them (single precision)."""
+    shape = (draw_rows(planar), DRAW_BLOCK)
+    return jax.random.normal(stream_key(key, _IMAGES, block), shape, jnp.float32)
+
+
+def image_draws_of(column: tuple, planar: bool) -> ImageDraws:
+    """The :class:`ImageDraws` of one column of :func:`block_draws` (float64)."""
+    w = [c.astype(jnp.float64) for c in column]
+    if planar:
+        zero = jnp.zeros_like(w[0])
+        return ImageDraws(jnp.stack([w[0], zero]), jnp.stack([w[1], zero]))
+    return ImageDraws(jnp.stack(w[:2]), jnp.stack(w[2:]))
 
 
 def _initial_nav(sim: PNSimulation, key):
@@ -279,47 +310,107 @@ def _control_step(sim: PNSimulation, law: AugmentedPNGuidance, record, carry: _C
     return new, rec
 
 
-def take_image(sim: PNSimulation, nav: NavEstimate, r_true: Vector3, w, key) -> NavEstimate:
-    """One LOS measurement and its EKF update: the camera points at the estimated target
-    direction (x_c = h x boresight lies in the orbit plane), the attitude error is white angle
-    noise of the front end (``sim.measurement``) and the filter's measurement noise. ``w``:
-    the image's two measurement normals; ``key``: for front ends that draw more."""
-    c_cam = camera_attitude(-nav.r, sim.context.reference_normal)
-    sigma = jnp.maximum(sim.errors.attitude_rad, 1e-9)
-    predicted = predict_los(nav, c_cam, sigma**2 * jnp.eye(2))
+def take_image(
+    sim: PNSimulation,
+    r_hat: Vector3,
+    v_hat: Vector3,
+    p: PackedCovariance,
+    r_true: Vector3,
+    w: Float[Array, "2"],
+    key: PRNGKeyArray,
+):
+    """One LOS measurement and the gain of its EKF update: the camera points at the estimated
+    target direction (x_c = h x boresight lies in the orbit plane), the attitude error is white
+    angle noise of the front end (``sim.measurement``) and the filter's measurement noise.
+    ``w``: the image's two measurement normals; ``key``: for front ends that draw more.
+
+    The update is ``navigation.ekf.ekf_update`` of ``predict_los`` in packed, sequential form
+    (``navigation.packed_ekf``); a planar run takes the in-plane angle only (the out-of-plane
+    one is exact and would change only out-of-plane entries, see ``packed_ekf.los_update``).
+    Returns the :class:`~gnc_jax.navigation.packed_ekf.LOSGain` (zero for a rejected image);
+    the caller updates the covariance (``apply_gain``, fused with the propagation).
+    """
+    c_cam = camera_attitude(-r_hat, sim.context.reference_normal)
+    r_var = jnp.maximum(sim.errors.attitude_rad, 1e-9) ** 2
+    # predict_los, written for the packed covariance (its S only for front ends that size a
+    # region of interest with it: unused by the Gaussian one, and then never computed)
+    xc = matvec3(c_cam, -r_hat)
+    inv = 1.0 / xc[2]
+    z_pred = xc[:2] * inv
+    h_r = -(c_cam[:2] - z_pred[:, None] * c_cam[2][None, :]) * inv
+    p_rr = jnp.stack([jnp.stack([p[i, j] for j in range(3)]) for i in range(3)])
+    hj = jnp.concatenate([h_r, jnp.zeros((2, 3))], axis=1)
+    r_cov = r_var * jnp.eye(2)
+    predicted = MeasurementPrediction(z_pred, hj, r_cov, matmul(matmul(h_r, p_rr), h_r.T) + r_cov)
+    nav = NavEstimate(jnp.concatenate([r_hat, v_hat]), unpack(p))
     meas = sim.measurement(Exposure(-r_true, c_cam, c_cam), nav, predicted, w, key)
-    nav, _ = ekf_update(nav, meas.z, predicted, meas.valid)
-    return nav
+    angles = 1 if sim.planar else 2
+    return los_gain(r_hat, v_hat, p, h_r, meas.z - z_pred, r_var, angles, meas.valid)
 
 
-def _image_step(sim: PNSimulation, law: AugmentedPNGuidance, key, spares, record, carry, i):
-    """One measurement interval: LOS image -> EKF update -> guidance steps -> covariance."""
+def _image_step(sim: PNSimulation, law: AugmentedPNGuidance, key, spares, record, carry, inputs):
+    """One measurement interval: LOS image -> EKF update -> guidance steps -> covariance.
+
+    ``inputs``: the image index and its column of :func:`block_draws` (one array per row)."""
+    i, column = inputs
     dt = sim.context.dt_s
     perfect = sim.nav_model == "perfect"
     image_dt = dt * sim.steps_per_image
     t = i * image_dt
-    w = computed_once(image_draws, i, key, i)
+    w = image_draws_of(column, sim.planar)
     if not perfect:
-        k_img = jax.random.fold_in(stream_key(key, _IMAGES, i), 1)
-        nav = computed_once(
-            lambda nav, r, w: take_image(sim, nav, r, w, k_img), i, carry.nav, carry.truth.r, w[:2]
+        k_img = stream_key(key, _FRONT_END, i)  # for front ends that draw (unused otherwise)
+        # The gain once into memory; the covariance update then reads it in one elementwise
+        # pass with the propagation (P is not read by the guidance steps in between).
+        gain = computed_once(  # live: the float time (an integer ``i == i`` folds to true)
+            lambda *a: take_image(sim, *a, k_img),
+            t,
+            carry.r_hat,
+            carry.v_hat,
+            carry.p,
+            carry.truth.r,
+            w.measurement,
         )
-        carry = carry.with_nav(nav)
-    carry = carry._replace(
-        first_pointing=w[2:4],
-        second_pointing=spares[carry.spares_used % N_SPARES],
-        ignitions_image=jnp.zeros_like(carry.ignitions_image),
-    )
+        p = propagate_packed(apply_gain(carry.p, gain.terms), image_dt, sim.process_noise_m2s3)
+        carry = carry._replace(r_hat=gain.r, v_hat=gain.v, p=p)
+    carry = carry._replace(first_pointing=w.pointing)
+    if sim.steps_per_image > 1:  # a second ignition in one interval: the next spare
+        carry = carry._replace(
+            second_pointing=spares[carry.spares_used % N_SPARES],
+            ignitions_image=jnp.zeros_like(carry.ignitions_image),
+        )
     step = functools.partial(_control_step, sim, law, record)
     if sim.steps_per_image == 1:  # one step per image: no inner loop (and its carry copies)
         carry, rec = step(carry, jnp.asarray(t, float))
         rec = jax.tree_util.tree_map(lambda x: x[None], rec)
     else:
         carry, rec = jax.lax.scan(step, carry, t + dt * jnp.arange(sim.steps_per_image))
-    if not perfect:
-        p = propagate_covariance(carry.p, image_dt, sim.process_noise_m2s3, 0.0)
-        carry = carry._replace(p=p)
     return carry, rec
+
+
+def _image_blocks(sim: PNSimulation, image_step, key, carry):
+    """All images: ``n_images // DRAW_BLOCK`` full blocks, then the remainder (if any), each
+    block drawing its normals once (:func:`block_draws`). Returns the carry and the trace
+    (image-major, None unless recording)."""
+
+    def block(carry, b, length=DRAW_BLOCK):
+        w = block_draws(key, b, sim.planar)
+        i = b * DRAW_BLOCK + jnp.arange(length)
+        columns = tuple(row[:length] for row in w)  # one array per row: contiguous per run
+        return jax.lax.scan(image_step, carry, (i, columns))
+
+    n_full, rest = divmod(sim.n_images, DRAW_BLOCK)
+    traces = []
+    if n_full:
+        carry, rec = jax.lax.scan(block, carry, jnp.arange(n_full))
+        traces.append(flatten_trace(rec))
+    if rest:
+        carry, rec = block(carry, jnp.asarray(n_full), rest)
+        traces.append(rec)
+    if traces[0] is None:
+        return carry, None
+    trace = jax.tree_util.tree_map(lambda *x: jnp.concatenate(x), *traces)
+    return carry, flatten_trace(trace)  # (images, steps per image) -> guidance steps
 
 
 def simulate(
@@ -341,7 +432,7 @@ def simulate(
         truth=sim.y0,
         r_hat=nav0.r,
         v_hat=nav0.v,
-        p=nav0.p,
+        p=pack(nav0.p),
         law_state=law.init(None, sim.context),
         on_prev=z,
         direction_prev=jnp.zeros(3),
@@ -357,7 +448,7 @@ def simulate(
         last_firing_s=z,
     )
     image_step = functools.partial(_image_step, sim, law, key, spares, record)
-    carry, rec = jax.lax.scan(image_step, carry0, jnp.arange(sim.n_images))
+    carry, rec = _image_blocks(sim, image_step, key, carry0)
 
     truth = carry.truth
     b, t_rest = coast_to_b_plane(sim.dynamics, truth, sim.c_bi, sim.coast_steps)
@@ -379,7 +470,7 @@ def simulate(
     )
     # ``not (t_rest > 0)`` rather than ``t_rest <= 0``: a NaN coast time is a time-out too.
     outcome = with_status(outcome, [(~(t_rest > 0.0), Status.time_out)])
-    return outcome, flatten_trace(rec)
+    return outcome, rec
 
 
 def initial_state(cfg: dict) -> tuple[InterceptState, bool]:
