@@ -251,10 +251,18 @@ def _control_step(sim: PNSimulation, law: AugmentedPNGuidance, record, carry: _C
     truth = carry.truth
     r_hat, v_hat = (truth.r, truth.v) if perfect else (carry.r_hat, carry.v_hat)
     navsol = PNNavigation(r_hat, v_hat, truth.r_target)
+
+    def law_and_gravity(state, nav):
+        # The filter's modelled gravity at the estimate is the law's A_r (eq. 10) before its
+        # projection: computed in the same branch, XLA evaluates it once for both.
+        command, state = law.step(state, nav, t, ctx)
+        g = None if perfect else ctx.dynamics.relative_gravity(nav.r_target, nav.r)
+        if not record:  # the command and N are diagnostics of the trace only
+            state = state._replace(command_mps2=jnp.zeros(3), coefficient=jnp.zeros(()))
+        return command, state, g
+
     # Once per step, not once per consumer loop (see _numerics.computed_once).
-    command, law_state = computed_once(
-        lambda s, n: law.step(s, n, t, ctx), t, carry.law_state, navsol
-    )
+    command, law_state, g = computed_once(law_and_gravity, t, carry.law_state, navsol)
     on = law_state.engine_on
     ignition = (on > 0.5) & (carry.on_prev <= 0.5)
     first = carry.ignitions_image == 0
@@ -279,7 +287,6 @@ def _control_step(sim: PNSimulation, law: AugmentedPNGuidance, record, carry: _C
     if not perfect:
         # Executed Δv (perfect accelerometer) plus the modelled gravity over the step,
         # straight-line mean propagation (navigation.ekf.propagate_state).
-        g = ctx.dynamics.relative_gravity(truth.r_target, r_hat)
         dv_nav = dv + g * dt
         r_hat, v_hat = r_hat + v_hat * dt + dv_nav * (0.5 * dt), v_hat + dv_nav
     fired = on > 0.5
