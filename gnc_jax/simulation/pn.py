@@ -1,12 +1,13 @@
 """Closed-loop deep-space intercept with augmented PN and pulse firing (seed 004; SPEC §6).
 
 One trajectory per call (`simulate`); Monte Carlo batches ``vmap`` it over per-run keys. Time
-is mission time from the Table 2 initial state (s). Two nested ``lax.scan`` loops: the outer
-one at the LOS-measurement interval (camera angles -> EKF update), the inner one at the
-guidance step (APN command -> Schmitt trigger -> pulse -> RK4 truth step of the heliocentric
-intercept dynamics -> EKF mean prediction). Guidance stops ``coast_s`` before the nominal
-impact; the truth then coasts to the B-plane, where the miss is measured (aim: the target's
-centre).
+is mission time from the Table 2 initial state (s). Nested ``lax.scan`` loops: blocks of
+``DRAW_BLOCK`` images (their normals drawn at once), the LOS-measurement interval (camera
+angles -> EKF update, in the packed form of ``navigation.packed_ekf``), and the guidance step
+(APN command -> Schmitt trigger -> pulse -> RK4 truth step of the heliocentric intercept
+dynamics -> EKF mean prediction; no loop when there is one step per image). Guidance stops
+``coast_s`` before the nominal impact; the truth then coasts to the B-plane, where the miss is
+measured (aim: the target's centre).
 
 Navigation (seed 004 Table 4 knowledge errors): the paper's Monte Carlo uses initial position
 knowledge (100, 10) km, velocity knowledge 0.1 m/s and a 320 urad attitude measurement error,
@@ -54,6 +55,7 @@ from ..guidance.apn import (
 from ..integrate import rk4_step
 from ..navigation.camera import camera_attitude
 from ..navigation.ekf import MeasurementPrediction, NavEstimate
+from ..navigation.measurements import AbstractMeasurement, Exposure, GaussianLOSMeasurement
 from ..navigation.packed_ekf import (
     PackedCovariance,
     apply_gain,
@@ -62,7 +64,6 @@ from ..navigation.packed_ekf import (
     propagate_packed,
     unpack,
 )
-from ..navigation.measurements import AbstractMeasurement, Exposure, GaussianLOSMeasurement
 from ..params import from_scenario, param
 from .base import flatten_trace, with_status
 
@@ -180,10 +181,6 @@ class _Carry(NamedTuple):
     ignitions: Array
     pulses: Array
     last_firing_s: Scalar
-
-    @property
-    def nav(self) -> NavEstimate:
-        return NavEstimate(jnp.concatenate([self.r_hat, self.v_hat]), unpack(self.p))
 
 
 # Random streams: once per run the knowledge errors and a table of spare pointing draws; once

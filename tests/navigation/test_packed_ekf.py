@@ -48,7 +48,9 @@ def test_propagation_matches_dense_phi_p_phi_t_plus_q():
     p = _random_spd(rng, [1e5, 1e4, 1e4, 0.1, 0.1, 0.1])
     dt, q = 1.0, 1e-9
     phi = np.block([[np.eye(3), dt * np.eye(3)], [np.zeros((3, 3)), np.eye(3)]])
-    qm = q * np.block([[dt**3 / 3 * np.eye(3), dt**2 / 2 * np.eye(3)], [dt**2 / 2 * np.eye(3), dt * np.eye(3)]])
+    qm = q * np.block(
+        [[dt**3 / 3 * np.eye(3), dt**2 / 2 * np.eye(3)], [dt**2 / 2 * np.eye(3), dt * np.eye(3)]]
+    )
     ref = phi @ p @ phi.T + qm
     got = np.asarray(unpack(propagate_packed(pack(jnp.asarray(p)), dt, q)))
     np.testing.assert_allclose(got, ref, rtol=1e-13, atol=1e-13 * np.abs(ref).max())
@@ -109,12 +111,16 @@ def test_rejected_image_and_certain_filter():
     r, v, p = _case(rng)
     h_r = jnp.asarray(rng.standard_normal((2, 3)) * 1e-9)
     innov = jnp.asarray([1e-4, -2e-4])
-    r1, v1, pk = los_update(jnp.asarray(r), jnp.asarray(v), pack(jnp.asarray(p)), h_r, innov, 1e-7, valid=False)
+    r1, v1, pk = los_update(
+        jnp.asarray(r), jnp.asarray(v), pack(jnp.asarray(p)), h_r, innov, 1e-7, valid=False
+    )
     np.testing.assert_array_equal(np.asarray(r1), r)
     np.testing.assert_array_equal(np.asarray(v1), v)
     np.testing.assert_array_equal(np.asarray(unpack(pk)), p)
     # P = 0 and R = 0: S is the floor, the gain zero (as ekf_update)
-    r2, v2, pk2 = los_update(jnp.asarray(r), jnp.asarray(v), pack(jnp.zeros((6, 6))), h_r, innov, 0.0)
+    r2, v2, pk2 = los_update(
+        jnp.asarray(r), jnp.asarray(v), pack(jnp.zeros((6, 6))), h_r, innov, 0.0
+    )
     np.testing.assert_array_equal(np.asarray(r2), r)
     np.testing.assert_array_equal(np.asarray(unpack(pk2)), 0.0)
 
@@ -144,7 +150,12 @@ def test_long_run_covariance_stays_symmetric_positive_definite():
         r1, v1 = r1 + v1, v1
         return (r1, v1, pk1, p1), None
 
-    x0 = (jnp.asarray(r0 + [5e5, 5e4, -5e4]), jnp.asarray(vel + 0.5), pack(jnp.asarray(p0)), jnp.asarray(p0))
+    x0 = (
+        jnp.asarray(r0 + [5e5, 5e4, -5e4]),
+        jnp.asarray(vel + 0.5),
+        pack(jnp.asarray(p0)),
+        jnp.asarray(p0),
+    )
     (r_hat, _, pk, p), _ = jax.jit(lambda x: jax.lax.scan(step, x, jnp.arange(1.0, n + 1.0)))(x0)
     packed, dense = np.asarray(unpack(pk)), np.asarray(p)
     assert np.all(np.linalg.eigvalsh(packed) > 0)
