@@ -11,7 +11,7 @@ from typing import NamedTuple
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._numerics import dot3
+from .._numerics import V3, as_array, as_v3, dot3
 from .._types import Array, Float, Scalar, Vector3
 from ..geometry.bplane import b_plane_crossing
 from ..integrate import integrate_fixed, rk4_step
@@ -50,6 +50,19 @@ class RelativeDynamics(eqx.Module):
         d = 3.0 * dot3(r, s)
         tide = self.tide_rate2 * jnp.stack([d * s[0] - r[0], d * s[1] - r[1], d * s[2] - r[2]])
         return point_mass + tide
+
+    def gravity_components(self, x, y, z):
+        """:meth:`gravity` with ``r`` given and returned as components (same arithmetic)."""
+        r2 = x * x + y * y + z * z
+        centre = r2 == 0.0
+        r2 = jnp.where(centre, 1.0, r2)
+        r3 = r2 * jnp.sqrt(r2)
+        mu, k, s = self.mu_target, self.tide_rate2, self.sun_direction
+        d = 3.0 * (x * s[0] + y * s[1] + z * s[2])
+        return tuple(
+            jnp.where(centre, 0.0, -mu * c / r3) + k * (d * s[i] - c)
+            for i, c in enumerate((x, y, z))
+        )
 
 
 class Engine(eqx.Module):
@@ -104,7 +117,24 @@ def rk4(
     dynamics: RelativeDynamics, y: ImpactorState, thrust_vector_n: Vector3, mass_flow, dt
 ) -> ImpactorState:
     """One classical RK4 step of ``dt`` (s) with the thrust and mass flow held over it."""
-    return rk4_step(vector_field, 0.0, y, dt, (dynamics, thrust_vector_n, mass_flow))
+    # By component (V3): under vmap every stage is then elementwise over the batch and the
+    # step fuses into one kernel; on (batch, 3) arrays it is a kernel per stage and shape
+    # (measured 2-3x slower for the bare integrator).
+    arrays = not isinstance(y.r, V3)
+    yc = ImpactorState(as_v3(y.r), as_v3(y.v), y.m)
+    out = rk4_step(
+        _vector_field_components, 0.0, yc, dt, (dynamics, as_v3(thrust_vector_n), mass_flow)
+    )
+    if arrays:
+        return ImpactorState(as_array(out.r), as_array(out.v), out.m)
+    return out
+
+
+def _vector_field_components(t, y, args):
+    """:func:`vector_field` with r, v and the thrust as tuples of components."""
+    dynamics, thrust, mass_flow = args
+    g = V3(*dynamics.gravity_components(*y.r))
+    return ImpactorState(y.v, g + thrust / y.m, -mass_flow)
 
 
 def propagate(
