@@ -39,7 +39,14 @@ import jax
 import jax.numpy as jnp
 
 from .._types import Array, Float, Scalar
-from ..dynamics.entry import G0, EntryState, entry_state_from_conditions
+from ..dynamics.entry import (
+    G0,
+    EntryState,
+    EntryStateXYZ,
+    entry_state_from_conditions,
+    from_xyz,
+    to_xyz,
+)
 from ..geometry.sphere import (
     along_cross_track,
     along_track_to_go,
@@ -61,6 +68,7 @@ from .entry_common import (
     EntryModel,
     EntryNav,
     FlightVariables,
+    altitude_speed_hdot,
     drag_and_lift,
     flight_variables,
     ground_range_m,
@@ -109,13 +117,21 @@ class ReferenceTrajectory(eqx.Module):
     range_per_cos_bank_m: Float[Array, " n"]
     time_to_go_s: Float[Array, " n"]
 
+    def _interpolator(self, speed):
+        """Linear interpolation in the table at ``speed``, clamped to its ends: the function
+        ``table -> value``. The speed grid is uniform (:func:`tabulate_reference`), so the
+        interval is found by arithmetic, not by a search (a loop of gathers under ``vmap``);
+        equal to ``jnp.interp`` up to rounding."""
+        v = self.velocity_mps
+        n = v.shape[0]
+        x = jnp.clip((v[0] - speed) / (v[0] - v[-1]) * (n - 1), 0.0, n - 1.0)
+        i = jnp.clip(jnp.floor(x).astype(jnp.int32), 0, n - 2)
+        w = x - i
+        return lambda table: table[i] + w * (table[i + 1] - table[i])
+
     def sensitivities(self, speed):
         """(dR/dN_gx, dR/dḢ, dR/dcos sigma, time to go) of the reference at ``speed``."""
-        xp = self.velocity_mps[::-1]
-
-        def f(table):
-            return jnp.interp(speed, xp, table[::-1])
-
+        f = self._interpolator(speed)
         return (
             f(self.range_per_drag_load_m),
             f(self.range_per_hdot_s),
@@ -125,11 +141,7 @@ class ReferenceTrajectory(eqx.Module):
 
     def lookup(self, speed):
         """(bank, range to go, Ḣ, N_gx, Ṡ) of the reference at ``speed`` (clamped)."""
-        xp = self.velocity_mps[::-1]
-
-        def f(table):
-            return jnp.interp(speed, xp, table[::-1])
-
+        f = self._interpolator(speed)
         return (
             f(self.bank_rad),
             f(self.range_to_go_m),
@@ -137,6 +149,10 @@ class ReferenceTrajectory(eqx.Module):
             f(self.drag_load_g),
             f(self.range_rate_mps),
         )
+
+    def bank_at(self, speed):
+        """The reference bank (rad) at ``speed``: ``lookup(speed)[0]``."""
+        return self._interpolator(speed)(self.bank_rad)
 
     def second_entry_range(self, fv: FlightVariables) -> Scalar:
         """Seed 003 eq. 10: S2 = S_std2 + dF/dv dv + dF/dtheta dtheta + dF/dH dH, m."""
@@ -199,17 +215,31 @@ class _PhaseEvents(NamedTuple):
     to_track: Array  # 1 or 2 -> 3: the switch point
 
 
+class _Point(NamedTuple):
+    """A predictor state with what the end-point location needs: altitude (m), Ḣ (m/s) and
+    sensed load (g)."""
+
+    y: EntryStateXYZ
+    altitude_m: Scalar
+    hdot_mps: Scalar
+    ng: Scalar
+
+
 class _PredictorState(NamedTuple):
-    y: EntryState
-    t: Scalar
+    """Loop state of a prediction. ``now`` is the state reached, ``dy`` its derivative with
+    the bank at ``now`` (the next step's first stage), ``before`` the state one step earlier:
+    the end point (switch or chute) is located inside that last step after the loop."""
+
+    now: _Point
+    dy: EntryStateXYZ
+    cos_bank: Scalar  # cosine of the bank flown from ``now``
+    before: _Point
+    t: Scalar  # time of ``now``
     pulled_up: Array
     kepler: Array
     second: Array
-    ng: Scalar
     kind: Array  # -1 running, else that of Prediction (3: inactive, no step taken)
     k: Array
-    y_end: EntryState
-    t_end: Scalar
 
 
 @register_law("skip_entry")
@@ -435,20 +465,28 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         prediction that never pulls up. A climb above ``skip_out_altitude_m`` or running out
         of steps returns a large overshoot. Under ``vmap`` the ``while_loop`` runs while one
         active run still integrates; an inactive run does no step.
+
+        The state is integrated as components, each step reusing the derivative evaluated at
+        the end of the previous one (four right-hand sides per step, the fourth also giving
+        the load); the end point is located inside the last step once, after the loop.
         """
-        v_0 = flight_variables(y, model.earth).speed_mps
+        y_xyz = to_xyz(y)
+        alt, v_0, hdot = altitude_speed_hdot(y_xyz, model.earth)
+        cos_b = jnp.cos(self.profile(sigma_0, v_0, v_0))
+        dy, density = model.vertical_plane_xyz(y_xyz, cos_b)
+        start = _Point(y_xyz, alt, hdot, model.load_g_xyz(density, v_0))
         f = jnp.asarray(False)
         c0 = _PredictorState(
-            y=y,
+            now=start,
+            dy=dy,
+            cos_bank=cos_b,
+            before=start,
             t=jnp.asarray(t, float),
             pulled_up=jnp.asarray(pulled_up),
             kepler=f,
             second=f,
-            ng=model.load_g(y),
-            kind=jnp.where(active, -1, 3),
-            k=jnp.asarray(0),
-            y_end=y,
-            t_end=jnp.asarray(t, float),
+            kind=jnp.where(active, -1, 3).astype(jnp.int32),
+            k=jnp.asarray(0, jnp.int32),
         )
         c = jax.lax.while_loop(
             lambda c: (c.kind < 0) & (c.k < self.predictor_max_steps),
@@ -457,66 +495,80 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         )
         return self._prediction(c, y, t, model, target_fixed)
 
-    def _predictor_step(self, c: "_PredictorState", sigma_0, v_0, model) -> "_PredictorState":
-        """One RK4 step of the prediction, and the end point if it lies inside the step."""
-        earth = model.earth
+    def _bank(self, second, sigma_0, v_0, speed):
+        """Bank magnitude the prediction flies: the first-entry profile, or the reference
+        after a skip without a Kepler phase (``second``)."""
+        return jnp.where(second, self.reference.bank_at(speed), self.profile(sigma_0, v_0, speed))
+
+    def _predictor_step(self, c: _PredictorState, sigma_0, v_0, model) -> _PredictorState:
+        """One RK4 step of the prediction (bank held over the step) and its phase logic."""
         dt = self.predictor_dt_s
-        fv = flight_variables(c.y, earth)
-        bank = jnp.where(
-            c.second,
-            self.reference.lookup(fv.speed_mps)[0],
-            self.profile(sigma_0, v_0, fv.speed_mps),
-        )
-        y1 = rk4_step(model.vertical_plane_field, c.t, c.y, dt, jnp.cos(bank))
-        fv1 = flight_variables(y1, earth)
-        ng1 = model.load_g(y1)
-        pulled = c.pulled_up | (fv1.hdot_mps > 0.0)
+
+        def field(t, y, _):
+            return model.vertical_plane_xyz(y, c.cos_bank)[0]
+
+        y1 = rk4_step(field, c.t, c.now.y, dt, k1=c.dy)
+        alt1, speed1, hdot1 = altitude_speed_hdot(y1, model.earth)
+        density1 = model.atmosphere.density(alt1)
+        ng1 = model.load_g_xyz(density1, speed1)
+        pulled = c.pulled_up | (hdot1 > 0.0)
         kepler = c.kepler | (pulled & (ng1 < self.kepler_load_g))
-        descending = pulled & (fv1.hdot_mps < 0.0) & (ng1 >= self.kepler_load_g)
+        descending = pulled & (hdot1 < 0.0) & (ng1 >= self.kepler_load_g)
         switch = kepler & descending
         second = c.second | (~kepler & descending)
-        chute = fv1.altitude_m < self.chute_altitude_m
-        skip = fv1.altitude_m > self.skip_out_altitude_m
-        # switch point: linear interpolation of the load crossing inside the step
-        s_sw = jnp.clip(
-            (self.kepler_load_g - c.ng) / jnp.where(ng1 != c.ng, ng1 - c.ng, 1.0), 0.0, 1.0
-        )
-        s_ch = hermite_crossing(
-            fv.altitude_m, fv.hdot_mps, fv1.altitude_m, fv1.hdot_mps, dt, self.chute_altitude_m
-        )
-        s = jnp.where(switch, s_sw, s_ch)
-        y_end = jax.tree_util.tree_map(lambda a, b: a + s * (b - a), c.y, y1)
-        kind = jnp.where(switch, 0, jnp.where(chute, 1, jnp.where(skip, 2, -1)))
+        chute = alt1 < self.chute_altitude_m
+        skip = alt1 > self.skip_out_altitude_m
+        kind = jnp.where(switch, 0, jnp.where(chute, 1, jnp.where(skip, 2, -1))).astype(jnp.int32)
+        cos_b1 = jnp.cos(self._bank(second, sigma_0, v_0, speed1))
+        dy1, _ = model.vertical_plane_xyz(y1, cos_b1, density=density1)
         return _PredictorState(
-            y=y1,
+            now=_Point(y1, alt1, hdot1, ng1),
+            dy=dy1,
+            cos_bank=cos_b1,
+            before=c.now,
             t=c.t + dt,
             pulled_up=pulled,
             kepler=kepler,
             second=second,
-            ng=ng1,
             kind=kind,
             k=c.k + 1,
-            y_end=y_end,
-            t_end=c.t + s * dt,
         )
 
-    def _prediction(self, c: "_PredictorState", y, t, model, target_fixed) -> Prediction:
+    def _end_point(self, c: _PredictorState):
+        """State and time where a finished prediction ends, inside its last step: the switch
+        point by linear interpolation of the load crossing, else the chute crossing by cubic
+        Hermite interpolation of the altitude (a prediction that took no step: its start)."""
+        dt = self.predictor_dt_s
+        a, b = c.before, c.now
+        s_sw = jnp.clip(
+            (self.kepler_load_g - a.ng) / jnp.where(b.ng != a.ng, b.ng - a.ng, 1.0), 0.0, 1.0
+        )
+        s_ch = hermite_crossing(
+            a.altitude_m, a.hdot_mps, b.altitude_m, b.hdot_mps, dt, self.chute_altitude_m
+        )
+        s = jnp.where(c.kind == 0, s_sw, s_ch)
+        y_end = jax.tree_util.tree_map(lambda p, q: p + s * (q - p), a.y, b.y)
+        t_end = jnp.where(c.k > 0, c.t - dt + s * dt, c.t)
+        return from_xyz(y_end), t_end
+
+    def _prediction(self, c: _PredictorState, y, t, model, target_fixed) -> Prediction:
         """Range error and crossrange of a finished prediction started at ``(y, t)``."""
         earth = model.earth
+        y_end, t_end = self._end_point(c)
         kind = jnp.where(c.kind < 0, 2, c.kind)  # out of steps: treat as a skip-out
         r_e = earth.equatorial_radius_m
         # Signed along-track position of the end point relative to the target, on the great
         # circle from here to the target (> 0 beyond it): a long skip that passes over the
         # target must count as an overshoot, which an unsigned distance would not.
         here = unit(to_earth_fixed(y.r, t, earth.rotation_rate))
-        end = unit(to_earth_fixed(c.y_end.r, c.t_end, earth.rotation_rate))
+        end = unit(to_earth_fixed(y_end.r, t_end, earth.rotation_rate))
         beyond = r_e * along_cross_track(end, here, target_fixed)[0]
-        s2 = self.reference.second_entry_range(flight_variables(c.y_end, earth))
+        s2 = self.reference.second_entry_range(flight_variables(y_end, earth))
         overshoot = 2.0 * self.reference.range_to_go_m[0] + 1.0e7
         miss = jnp.where(kind == 0, s2 + beyond, jnp.where(kind == 1, beyond, overshoot))
-        target = to_inertial(target_fixed, c.t_end, earth.rotation_rate)
-        v_rel = c.y_end.v - jnp.cross(earth.angular_velocity(), c.y_end.r)
-        chi = r_e * crossrange_to_target(c.y_end.r, v_rel, target)
+        target = to_inertial(target_fixed, t_end, earth.rotation_rate)
+        v_rel = y_end.v - jnp.cross(earth.angular_velocity(), y_end.r)
+        chi = r_e * crossrange_to_target(y_end.r, v_rel, target)
         return Prediction(miss, chi, kind, c.k)
 
     def correct(self, y, t, pulled_up, sigma_prev, model, target_fixed, enabled):
