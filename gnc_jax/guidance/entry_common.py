@@ -109,6 +109,11 @@ class EntryGuidanceContext(eqx.Module):
         hold_bank_rad: bank held before guidance starts.
         ratio_filter_gain: gain per control step of the measured drag/lift ratio filter.
         pc_every: control steps per predictor-corrector cycle.
+        cycle_start: whether this control step starts a predictor-corrector cycle, when the
+            caller keeps the clock (a simulator looping over cycles of ``pc_every`` steps: a
+            flag it knows for every run at once, so that under ``vmap`` the corrector stays a
+            ``lax.cond`` instead of running, masked, at every step); ``None``: the law counts
+            its own steps (``step % pc_every == 0``), the same schedule.
     """
 
     model: EntryModel
@@ -116,6 +121,7 @@ class EntryGuidanceContext(eqx.Module):
     hold_bank_rad: Scalar
     ratio_filter_gain: Scalar
     pc_every: int = eqx.field(static=True, default=4)
+    cycle_start: Array | None = None
 
 
 class EntryGuidanceLog(NamedTuple):

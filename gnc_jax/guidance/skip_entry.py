@@ -805,9 +805,13 @@ class SkipEntryGuidance(AbstractEntryGuidance):
                 cost=jnp.zeros(()),
             )
 
-        is_pc_step = (state.step % ctx.pc_every) == 0
+        if ctx.cycle_start is None:
+            is_pc_step = (state.step % ctx.pc_every) == 0
+        else:
+            is_pc_step = ctx.cycle_start
+        active = active & is_pc_step  # (should the cond be batched, an idle step predicts nothing)
         res = jax.lax.cond(is_pc_step, pc, no_pc, None)
-        return res, is_pc_step & active
+        return res, active
 
     def _bank_sign(self, state: SkipEntryState, phase, fv, chi_switch, chi_now, live):
         """Sign of the bank and whether it reverses this step.

@@ -434,7 +434,14 @@ def simulate(sim: CapsuleSimulation, law: AbstractEntryGuidance, key: PRNGKeyArr
 
     Every control step the accelerometers measure the drag and lift of the dispersed vehicle,
     the law commands a bank from them and the navigated (true) state, and the truth flies
-    ``substeps`` RK4 steps with the bank the actuator achieves."""
+    ``substeps`` RK4 steps with the bank the actuator achieves.
+
+    The control steps run in guidance cycles of ``pc_every`` steps whose first runs the
+    corrector: the simulator keeps that clock (``ctx.cycle_start``), the same for every run, so
+    that under ``vmap`` the corrector is a ``lax.cond`` on it. Without ``record`` the cycles
+    are a ``while_loop`` that stops once the flight is down (under ``vmap``: once every run of
+    the batch is; a finished flight is frozen either way, so the outcome is the same), with
+    ``record`` a ``scan`` over the whole ``max_time_s`` for fixed-length traces."""
     y0, vehicle, atmosphere, draws = dispersed_entry(sim, key)
     truth = EntryArgs(vehicle, sim.earth, atmosphere, jnp.zeros(()))
     ctx = guidance_context(sim)
@@ -442,9 +449,10 @@ def simulate(sim: CapsuleSimulation, law: AbstractEntryGuidance, key: PRNGKeyArr
     def measure(y):
         return EntryNav(y, *drag_and_lift(y, vehicle, sim.earth, atmosphere))
 
-    def control_step(c: _Carry, _):
+    def control_step(c: _Carry, j):
         nav = measure(from_xyz(c.flight.y))
-        command, g = law.step(c.guidance, nav, c.flight.t, ctx)
+        step_ctx = eqx.tree_at(lambda x: x.cycle_start, ctx, j == 0, is_leaf=lambda x: x is None)
+        command, g = law.step(c.guidance, nav, c.flight.t, step_ctx)
         flight, _ = jax.lax.scan(
             lambda f, _: (_truth_substep(sim, truth, command, f), None),
             c.flight,
@@ -453,6 +461,9 @@ def simulate(sim: CapsuleSimulation, law: AbstractEntryGuidance, key: PRNGKeyArr
         )
         rec = _trace(y0, c, nav, command, g, sim.earth) if record else None
         return _Carry(flight=flight, guidance=g), rec
+
+    def cycle(c: _Carry, n=sim.pc_every):
+        return jax.lax.scan(control_step, c, jnp.arange(n))
 
     z = jnp.zeros(())
     y0_xyz = to_xyz(y0)
@@ -469,8 +480,22 @@ def simulate(sim: CapsuleSimulation, law: AbstractEntryGuidance, key: PRNGKeyArr
         heat_peak=z,
         load_peak=z,
     )
-    c0 = _Carry(flight=flight, guidance=law.init(measure(y0), ctx))
-    c, rec = jax.lax.scan(control_step, c0, None, length=sim.n_control)
+    c = _Carry(flight=flight, guidance=law.init(measure(y0), ctx))
+    n_cycles, rest = divmod(sim.n_control, sim.pc_every)
+    if record:
+        c, rec = jax.lax.scan(lambda c, _: cycle(c), c, None, length=n_cycles)
+        rec = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[2:]), rec)
+    else:
+        c, _ = jax.lax.while_loop(
+            lambda ck: (ck[1] < n_cycles) & ~ck[0].flight.done,
+            lambda ck: (cycle(ck[0])[0], ck[1] + 1),
+            (c, jnp.asarray(0, jnp.int32)),
+        )
+        rec = None
+    if rest:  # the control steps of a last, partial cycle (a finished flight is frozen)
+        c, tail = cycle(c, rest)
+        if record:
+            rec = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), rec, tail)
     chute, t_chute = _chute_point(sim, truth, c.flight, y0)
     return _outcome(sim, c, chute, t_chute, draws), rec
 
