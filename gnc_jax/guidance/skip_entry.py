@@ -189,6 +189,10 @@ class SkipEntryState(NamedTuple):
         drag_ratio, lift_ratio: filtered ratios of measured to modelled drag and lift.
         last_status: :class:`~gnc_jax.root_finding.RootStatus` of the last corrector cycle.
         predicted_crossrange: crossrange at the switch point of the last corrector solution, m.
+        corrector_slope: d(predicted range error)/d sigma_0 of the last corrector cycle (the
+            secant through its last two predictions), m/rad; NaN before the first.
+        plan_speed: Earth-relative speed at the last corrector solution, m/s (NaN before the
+            first): the start v_0 of the profile it planned.
         step: control steps taken; the corrector runs when ``step % pc_every == 0``.
         log: the diagnostics of the outcome and the trace.
     """
@@ -203,6 +207,8 @@ class SkipEntryState(NamedTuple):
     lift_ratio: Scalar
     last_status: Array
     predicted_crossrange: Scalar
+    corrector_slope: Scalar
+    plan_speed: Scalar
     step: Array
     log: EntryGuidanceLog
 
@@ -235,6 +241,7 @@ class _PredictorState(NamedTuple):
     cos_bank: Scalar  # cosine of the bank flown from ``now``
     before: _Point
     t: Scalar  # time of ``now``
+    dt: Scalar  # length of the step from ``before`` to ``now``
     pulled_up: Array
     kepler: Array
     second: Array
@@ -393,7 +400,30 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         static=True,
         doc="RK4 step of the predictor (see benchmarks/entry_integrators.py)",
     )
+    predictor_coast_dt_s: float = param(
+        32.0,
+        lo=0.01,
+        hi=120.0,
+        units="s",
+        static=True,
+        doc="RK4 step of the predictor while the load is below predictor_coast_load_g (the "
+        "Kepler arc, where drag is small; see benchmarks/entry_integrators.py)",
+    )
+    predictor_coast_load_g: Scalar = param(
+        0.02,
+        lo=0.0,
+        hi=5.0,
+        units="g",
+        doc="load below which the predictor takes its coast step (below the Kepler-phase load)",
+    )
     predictor_max_steps: int = param(1000, lo=10, hi=100000, doc="predictor step budget")
+    corrector_start: str = param(
+        "secant",
+        choices=("secant", "bracket"),
+        doc="corrector start: 'secant' (warm start on the last solution's planned profile, then "
+        "a secant step on the last cycle's slope) or 'bracket' (the last solution, then the Δσ "
+        "step of eq. 15, as the seed)",
+    )
     n_bracket: int = param(6, lo=1, hi=100, doc="bracketing steps of the corrector")
     n_iter: int = param(6, lo=1, hi=100, doc="regula-falsi iterations of the corrector")
 
@@ -402,6 +432,14 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         if section["bank_min_deg"] >= section["bank_max_deg"]:
             raise ScenarioError(
                 "guidance.skip_entry.bank_min_deg: must be < guidance.skip_entry.bank_max_deg"
+            )
+        if section["predictor_coast_load_g"] >= section["kepler_load_g"]:
+            # the switch point (the load rising through kepler_load_g) is located in a step
+            # of predictor_dt_s only if the coast steps stop below it
+            raise ScenarioError(
+                "guidance.skip_entry.predictor_coast_load_g: "
+                f"{section['predictor_coast_load_g']:g} g; allowed: below "
+                f"guidance.skip_entry.kepler_load_g = {section['kepler_load_g']:g} g"
             )
         altitude = config["entry"]["altitude_km"]
         if section["skip_out_altitude_km"] <= altitude:
@@ -455,7 +493,8 @@ class SkipEntryGuidance(AbstractEntryGuidance):
     ) -> Prediction:
         """Predicted range error of the bank profile ``sigma_0`` (seed 003 §3.1), m.
 
-        Integrates the vertical-plane dynamics (RK4, ``predictor_dt_s``) from ``(y, t)`` with
+        Integrates the vertical-plane dynamics (RK4, ``predictor_dt_s``; ``predictor_coast_dt_s``
+        at low load) from ``(y, t)`` with
         the first-entry profile. The prediction normally stops at the switch point — the end of
         the Kepler phase: after the pull-up the load fell below ``kepler_load_g`` and has just
         risen above it again — and returns S2(eq. 10 at the switch state) minus the range
@@ -482,6 +521,7 @@ class SkipEntryGuidance(AbstractEntryGuidance):
             cos_bank=cos_b,
             before=start,
             t=jnp.asarray(t, float),
+            dt=jnp.zeros(()),
             pulled_up=jnp.asarray(pulled_up),
             kepler=f,
             second=f,
@@ -501,8 +541,13 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         return jnp.where(second, self.reference.bank_at(speed), self.profile(sigma_0, v_0, speed))
 
     def _predictor_step(self, c: _PredictorState, sigma_0, v_0, model) -> _PredictorState:
-        """One RK4 step of the prediction (bank held over the step) and its phase logic."""
+        """One RK4 step of the prediction (bank held over the step) and its phase logic.
+
+        The step is ``predictor_dt_s``, or ``predictor_coast_dt_s`` while the load is below
+        ``predictor_coast_load_g`` (the high part of the Kepler arc)."""
         dt = self.predictor_dt_s
+        if self.predictor_coast_dt_s != dt:
+            dt = jnp.where(c.now.ng < self.predictor_coast_load_g, self.predictor_coast_dt_s, dt)
 
         def field(t, y, _):
             return model.vertical_plane_xyz(y, c.cos_bank)[0]
@@ -527,6 +572,7 @@ class SkipEntryGuidance(AbstractEntryGuidance):
             cos_bank=cos_b1,
             before=c.now,
             t=c.t + dt,
+            dt=jnp.asarray(dt, float),
             pulled_up=pulled,
             kepler=kepler,
             second=second,
@@ -538,7 +584,7 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         """State and time where a finished prediction ends, inside its last step: the switch
         point by linear interpolation of the load crossing, else the chute crossing by cubic
         Hermite interpolation of the altitude (a prediction that took no step: its start)."""
-        dt = self.predictor_dt_s
+        dt = self.predictor_dt_s if self.predictor_coast_dt_s == self.predictor_dt_s else c.dt
         a, b = c.before, c.now
         s_sw = jnp.clip(
             (self.kepler_load_g - a.ng) / jnp.where(b.ng != a.ng, b.ng - a.ng, 1.0), 0.0, 1.0
@@ -571,11 +617,15 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         chi = r_e * crossrange_to_target(y_end.r, v_rel, target)
         return Prediction(miss, chi, kind, c.k)
 
-    def correct(self, y, t, pulled_up, sigma_prev, model, target_fixed, enabled):
+    def correct(self, y, t, pulled_up, sigma_prev, model, target_fixed, enabled, slope=None):
         """Bounded regula falsi on sigma_0 (seed 003 eqs. 11-15), a fixed-iteration loop.
 
-        The result's ``aux`` is the predicted crossrange at the switch point of the solution,
-        its ``cost`` the number of predictor RK4 steps taken by all predictions of the cycle."""
+        Warm-started at the previous solution; with ``corrector_start = "secant"`` and the
+        previous cycle's ``slope`` (m/rad), a miss of the warm start is followed by the secant
+        step on that slope instead of the Δσ step of eq. 15. The result's ``aux`` is the
+        predicted crossrange at the switch point of the solution, its ``cost`` the number of
+        predictor RK4 steps taken by all predictions of the cycle, its ``slope`` this
+        cycle's."""
 
         def miss(sigma_0, active):
             p = self.predict(y, t, pulled_up, sigma_0, model, target_fixed, active)
@@ -593,6 +643,8 @@ class SkipEntryGuidance(AbstractEntryGuidance):
             illinois=True,
             decreasing=True,
             enabled=enabled,
+            slope=slope if self.corrector_start == "secant" else None,
+            anderson_bjorck=self.corrector_start == "secant",
         )
 
     # ---- reference tracking (seed 003 §2.2, eqs. 6-7, 16-17) ----
@@ -674,6 +726,8 @@ class SkipEntryGuidance(AbstractEntryGuidance):
             lift_ratio=jnp.ones(()),
             last_status=zi,
             predicted_crossrange=z,
+            corrector_slope=jnp.full((), jnp.nan),
+            plan_speed=jnp.full((), jnp.nan),
             step=zi,
             log=log,
         )
@@ -699,7 +753,9 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         bank_offset = jnp.where(
             events.to_track, self.switch_compensation(fv, to_go), state.bank_offset
         )
-        res, did_pc = self._corrector_cycle(state, y, t, ctx, model, pulled, live & (phase == 1))
+        res, did_pc = self._corrector_cycle(
+            state, y, t, fv.speed_mps, ctx, model, pulled, live & (phase == 1)
+        )
         sigma_0 = jnp.where(did_pc, res.x, state.sigma_0)
         chi_switch = jnp.where(did_pc, res.aux, state.predicted_crossrange)
 
@@ -739,6 +795,8 @@ class SkipEntryGuidance(AbstractEntryGuidance):
             lift_ratio=lift_ratio,
             last_status=jnp.where(did_pc, res.status, state.last_status),
             predicted_crossrange=chi_switch,
+            corrector_slope=jnp.where(did_pc, res.slope, state.corrector_slope),
+            plan_speed=jnp.where(did_pc, fv.speed_mps, state.plan_speed),
             step=state.step + 1,
             log=log,
         )
@@ -784,13 +842,32 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         phase = jnp.where(to_track, 3, phase)
         return phase, pulled, _PhaseEvents(start, to_kepler, to_track)
 
-    def _corrector_cycle(self, state: SkipEntryState, y, t, ctx, model, pulled, active):
+    def warm_start(self, state: SkipEntryState, speed):
+        """The corrector's first guess at ``speed``: with ``corrector_start = "secant"`` the
+        bank the last solution's profile planned for this speed (the root it would have
+        if the flight went as planned), else the last solution sigma_0 itself (seed 003)."""
+        if self.corrector_start != "secant":
+            return state.sigma_0
+        planned = self.profile(state.sigma_0, state.plan_speed, speed)
+        return jnp.where(jnp.isnan(state.plan_speed), state.sigma_0, planned)
+
+    def _corrector_cycle(self, state: SkipEntryState, y, t, speed, ctx, model, pulled, active):
         """The corrector on a predictor-corrector step (every ``pc_every`` control steps),
         else the previous solution. Returns the result and whether it is a new solution: only
         an ``active`` run (in phase 1) does any work."""
 
         def pc(_):
-            return self.correct(y, t, pulled, state.sigma_0, model, ctx.target_fixed, active)
+            res = self.correct(
+                y,
+                t,
+                pulled,
+                self.warm_start(state, speed),
+                model,
+                ctx.target_fixed,
+                active,
+                state.corrector_slope,
+            )
+            return res._replace(slope=jnp.asarray(res.slope, dtype=float))
 
         def no_pc(_):
             z = jnp.zeros((), int)
@@ -803,6 +880,7 @@ class SkipEntryGuidance(AbstractEntryGuidance):
                 status=z,
                 aux=state.predicted_crossrange,
                 cost=jnp.zeros(()),
+                slope=state.corrector_slope,
             )
 
         if ctx.cycle_start is None:
