@@ -243,6 +243,10 @@ class CapsuleSystem(AbstractSystem):
 
     # measured with benchmarks/capsule_cost.py (wall s x devices / runs / steps)
     step_seconds = STEP_SECONDS
+    # measured with benchmarks/capsule.py (per-run time against the chunk size): the lowest
+    # per-run time is at 256 runs per device, whose working set (about 2 kB per run of
+    # live buffers, the compiled chunk's temp memory) half fills a 1 MB L2 cache
+    chunk_per_device = 256
 
     def check(self, config):
         capsule_scenario.check(config)
