@@ -417,6 +417,13 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         doc="load below which the predictor takes its coast step (below the Kepler-phase load)",
     )
     predictor_max_steps: int = param(1000, lo=10, hi=100000, doc="predictor step budget")
+    predictor_bank: str = param(
+        "step",
+        choices=("step", "stage"),
+        doc="bank of the predicted profile: 'step' (held over each RK4 step, as flown) or "
+        "'stage' (at every RK4 stage: 4th order, about 100 times smaller prediction error at "
+        "8 s steps, twice the cost per step; see benchmarks/entry_integrators.py)",
+    )
     corrector_start: str = param(
         "secant",
         choices=("secant", "bracket"),
@@ -541,7 +548,9 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         return jnp.where(second, self.reference.bank_at(speed), self.profile(sigma_0, v_0, speed))
 
     def _predictor_step(self, c: _PredictorState, sigma_0, v_0, model) -> _PredictorState:
-        """One RK4 step of the prediction (bank held over the step) and its phase logic.
+        """One RK4 step of the prediction and its phase logic. The bank is held over the step
+        at its value at the step's start (``predictor_bank = "step"``, a first-order error in
+        the step) or follows the profile at every stage (``"stage"``).
 
         The step is ``predictor_dt_s``, or ``predictor_coast_dt_s`` while the load is below
         ``predictor_coast_load_g`` (the high part of the Kepler arc)."""
@@ -550,6 +559,10 @@ class SkipEntryGuidance(AbstractEntryGuidance):
             dt = jnp.where(c.now.ng < self.predictor_coast_load_g, self.predictor_coast_dt_s, dt)
 
         def field(t, y, _):
+            if self.predictor_bank == "stage":  # the profile at this stage's speed
+                speed = altitude_speed_hdot(y, model.earth)[1]
+                cos_b = jnp.cos(self._bank(c.second, sigma_0, v_0, speed))
+                return model.vertical_plane_xyz(y, cos_b)[0]
             return model.vertical_plane_xyz(y, c.cos_bank)[0]
 
         y1 = rk4_step(field, c.t, c.now.y, dt, k1=c.dy)
