@@ -26,7 +26,8 @@ FIRST_ENTRY_FRACTION = 0.16  # corrector-active first entry over the flight: (22
 HORIZON_FRACTION = 0.56  # mean time to the switch point from a corrector cycle over the flight
 COAST_FRACTION = 0.6  # of that horizon flown in the predictor's coast steps (load < 0.02 g)
 PREDICTIONS_PER_CYCLE = 2.7  # mean predictions per corrector cycle (131 over 49 cycles)
-STEP_SECONDS = 2.7e-6  # s per step and device: paper scenario, 256 runs in 8.3 s on 2 devices
+STEP_SECONDS = 1.5e-6  # s per step and device (benchmarks/capsule_cost.py): 0.6e-6 on the paper
+# scenario (256 runs in 0.69 s on 2 devices), 2.8e-6 and 3.4e-6 at 5000 and 2500 km
 
 
 def _interval(x: np.ndarray) -> dict[str, Any]:
