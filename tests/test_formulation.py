@@ -105,3 +105,16 @@ def test_written_out_matmul_equals_numpy():
         np.testing.assert_allclose(
             np.asarray(matmul(jnp.asarray(a), jnp.asarray(b))), a @ b, rtol=1e-13
         )
+
+
+def test_certain_filter_and_noiseless_measurement_update_stays_finite():
+    """P = 0 and R = 0 give S = 0 (floored to 1e-200 I, whose determinant underflows): the
+    written-out inverse must still give K = 0, as the LAPACK solve did."""
+    from gnc_jax.navigation.ekf import ekf_update
+
+    c = jnp.eye(3)
+    nav = NavEstimate(jnp.asarray([-4e6, 2e5, -1e5, 1.02e4, 3.0, -2.0]), jnp.zeros((6, 6)))
+    predicted = predict_los(nav, c, jnp.zeros((2, 2)))
+    new, _ = ekf_update(nav, predicted.z + 1e-6, predicted)
+    np.testing.assert_array_equal(np.asarray(new.x), np.asarray(nav.x))
+    np.testing.assert_array_equal(np.asarray(new.p), 0.0)

@@ -120,15 +120,15 @@ def test_initial_covariance_image_update_and_covariance_propagation_equal_gnc_ja
     p = bsk.scenario_params(scenario.config)
     key = jax.random.key(11)
     truth, nav, draws = jax.jit(initial_conditions)(sim, key)
-    image = jax.jit(lambda nav, r, bias, k: take_image(sim, nav, r, bias, k)[0])
+    image = jax.jit(lambda nav, r, bias, w, k: take_image(sim, nav, r, bias, w, k)[0])
     np.testing.assert_allclose(bsk.initial_covariance(p), np.asarray(nav.p), rtol=1e-12, atol=1e-9)
     x, cov = np.asarray(nav.x), np.asarray(nav.p)
     bias = np.asarray(draws["attitude_bias_rad"])
     for i in range(3):
         k = jax.random.fold_in(key, i)
-        ref = image(NavEstimate(jnp.asarray(x), jnp.asarray(cov)), truth.r, bias, k)
-        # take_image draws its 8 normals this way (2 centroid, 3 control, 3 knowledge)
+        # the image's 8 normals (2 centroid, 3 control, 3 knowledge), fed to both sides
         w = np.asarray(jax.random.normal(k, (8,)))
+        ref = image(NavEstimate(jnp.asarray(x), jnp.asarray(cov)), truth.r, bias, jnp.asarray(w), k)
         x, cov = bsk.take_image(x, cov, np.asarray(truth.r), bias, w, p, np.asarray(p["c_bi"])[2])
         np.testing.assert_allclose(x, np.asarray(ref.x), rtol=1e-10, atol=1e-6)
         np.testing.assert_allclose(

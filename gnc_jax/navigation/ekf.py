@@ -121,8 +121,12 @@ def _inverse(s: Float[Array, "m m"]) -> Float[Array, "m m"]:
     if m == 1:
         return 1.0 / s
     if m == 2:
-        det = s[0, 0] * s[1, 1] - s[0, 1] * s[1, 0]
-        return jnp.stack([jnp.stack([s[1, 1], -s[0, 1]]), jnp.stack([-s[1, 0], s[0, 0]])]) / det
+        # Scaled by the larger diagonal entry first: a floor-sized S (1e-200 I, a certain
+        # filter and a noiseless measurement) has a determinant below the smallest double.
+        d = jnp.maximum(s[0, 0], s[1, 1])
+        a, b, c, e = s[0, 0] / d, s[0, 1] / d, s[1, 0] / d, s[1, 1] / d
+        adj = jnp.stack([jnp.stack([e, -b]), jnp.stack([-c, a])])
+        return adj / ((a * e - b * c) * d)
     return jnp.linalg.solve(s, jnp.eye(m))
 
 
