@@ -14,10 +14,13 @@ In one process, for ``lunar-skip-entry``:
   predictor RK4 step (``predictor_steps``); closed/bare = that rate over the bare one;
 * **profile** -- the same chunk, split by measurement: the truth loop alone (the truth steps
   of the chunk's control steps), the control steps with the law but no corrector cycle, and
-  the predictor step alone (all runs integrating); the corrector's cycles are the rest, and
-  the part of it beyond its useful predictor steps at the predictor's own step cost is what
-  the lock-step batch loses to waiting: every one of the corrector's fixed prediction slots
-  runs, under ``vmap``, as long as the slowest run still predicting in it;
+  the predictor step alone (all runs integrating); the corrector's cycles are the rest. Of
+  those, the lock-step batch loses to waiting (every one of the corrector's fixed prediction
+  slots runs, under ``vmap``, as long as the slowest run still predicting in it) what the
+  chunk spends beyond the identical chunk's corrector time per predictor step (below); the
+  identical chunk's own excess over the predictor's isolated step cost is the corrector's
+  overhead in the loop (per prediction: its start and end point, the root finder's
+  bookkeeping, the loop's carried state);
 * **ablations** -- one change removed at a time (same chunk, same core): the seed's
   corrector start (the last solution, eq. 15 bracketing, Illinois) instead of the planned-
   profile warm start with secant steps and Anderson-Bjorck; 8 s predictor steps throughout
@@ -104,15 +107,26 @@ def bare_limit(sim, n, repeats, n_steps=2500):
 
 def closed_loop(sim, law, n, repeats, identical=False):
     """One chunk of the closed loop on one core: wall time and the outcomes. ``identical``:
-    every run of the chunk is run 7 (the same work in every lane: no run waits for another)."""
+    every run of the chunk is run 7 (the same work in every lane: no run waits for another).
+    The run indices are an argument, so that the identical chunk is still a batch of ``n``
+    runs (a constant index would leave ``vmap`` nothing to batch: one run, broadcast)."""
 
     def one(i):
-        return capsule_sim.simulate(sim, law, gj.run_key(0, 7 if identical else i))[0]
+        return capsule_sim.simulate(sim, law, gj.run_key(0, i))[0]
 
-    fn, compile_s = _compiled(jax.vmap(one), jnp.arange(n))
-    t = _best(lambda: fn(jnp.arange(n)), repeats)
-    out = jax.tree_util.tree_map(np.asarray, fn(jnp.arange(n)))
+    index = jnp.full((n,), 7) if identical else jnp.arange(n)
+    fn, compile_s = _compiled(jax.vmap(one), index)
+    t = _best(lambda: fn(index), repeats)
+    out = jax.tree_util.tree_map(np.asarray, fn(index))
     return t, out, compile_s
+
+
+def _per_control_step(sim, n, out, wall):
+    """Control steps of a chunk's loop (to its last chute, whole corrector cycles) and the
+    wall time per control step and run, ns."""
+    n_control = int(np.ceil(np.max(out.t_chute_s) / sim.control_dt))
+    n_control = -(-n_control // sim.pc_every) * sim.pc_every
+    return n_control, wall / (n * n_control) * 1e9
 
 
 def useful_evals(sim, out):
@@ -313,7 +327,7 @@ def run(quick: bool = False, measure_100k: bool = False) -> dict:
     n = 64 if quick else chunk
 
     bare, _ = bare_limit(sim, n, repeats)
-    variant_rows = []
+    variant_rows, measured = [], {}
     variants = {"now": {}} if quick else {**VARIANTS, **STEP_VARIANTS, IDENTICAL: {}}
     for name, change in variants.items():
         variant = dataclasses.replace(law, **change)
@@ -336,13 +350,10 @@ def run(quick: bool = False, measure_100k: bool = False) -> dict:
                 crossrange_std_km=float(np.std(out.crossrange_err_km[ok])),
             )
         )
-        if name == "now":
-            now_out, now_wall = out, wall
+        measured[name] = (out, wall)
 
     # profile of the chunk (now): per control step of the chunk's loop
-    n_control = int(np.ceil(np.max(now_out.t_chute_s) / sim.control_dt))
-    n_control = -(-n_control // sim.pc_every) * sim.pc_every
-    per_control = now_wall / (n * n_control) * 1e9
+    n_control, per_control = _per_control_step(sim, n, *measured["now"])
     if quick:  # the pieces need four more compilations
         t_truth = t_guid = t_pred = float("nan")
     else:
@@ -350,7 +361,15 @@ def run(quick: bool = False, measure_100k: bool = False) -> dict:
         t_guid = guidance_only(sim, law, n, n_control, repeats)
         t_pred = predictor_step(sim, law, n, repeats)
     corrector = per_control - t_truth - t_guid
-    useful_pred = float(np.mean(now_out.predictor_steps)) * t_pred / n_control
+    useful_pred = float(np.mean(measured["now"][0].predictor_steps)) * t_pred / n_control
+    # the corrector without the waiting: the identical chunk's corrector time per predictor
+    # step at this chunk's predictor steps; the rest of the corrector's time is waiting
+    no_wait = float("nan")
+    if IDENTICAL in measured:
+        out_i, wall_i = measured[IDENTICAL]
+        n_control_i, per_control_i = _per_control_step(sim, n, out_i, wall_i)
+        steps_i = float(np.mean(out_i.predictor_steps)) / n_control_i
+        no_wait = (per_control_i - t_truth - t_guid) / steps_i * useful_pred / t_pred
     truth_bare = sim.substeps * bare["ns_per_step"]  # the loop's truth steps at the limit
     profile = dict(
         closed_ns_per_control_step=per_control,
@@ -359,6 +378,7 @@ def run(quick: bool = False, measure_100k: bool = False) -> dict:
         guidance_ns=t_guid,
         corrector_ns=corrector,
         corrector_useful_ns=useful_pred,
+        corrector_no_waiting_ns=no_wait,
         predictor_step_ns=t_pred,
         bare_rk4_step_ns=bare["ns_per_step"],
     )
@@ -381,6 +401,8 @@ def run(quick: bool = False, measure_100k: bool = False) -> dict:
         "|---:|---:|---:|---:|",
         f"| {bare['evals_per_s']:.3g} | {variant_rows[0]['evals_per_s']:.3g} | "
         f"{variant_rows[0]['fraction_of_bare']:.0%} | {1e3 / variant_rows[0]['ms_per_run']:.0f} |",
+    ]
+    pieces = [
         "",
         "| piece (ns per control step and run, 1 core) | ns | share | at its limit |",
         "|---|---:|---:|---:|",
@@ -390,6 +412,13 @@ def run(quick: bool = False, measure_100k: bool = False) -> dict:
         f"| measurement + law step, no corrector | {t_guid:.0f} | {share(t_guid)} | |",
         f"| corrector cycles | {corrector:.0f} | {share(corrector)} | {useful_pred:.0f} "
         f"(useful steps x {t_pred:.0f} ns) |",
+        f"| - as the identical chunk's, per predictor step (no waiting) | {no_wait:.0f} | "
+        f"{share(no_wait)} | |",
+        f"| - lock-step waiting (the rest) | {corrector - no_wait:.0f} | "
+        f"{share(corrector - no_wait)} | |",
+    ]
+    lines += [] if quick else pieces  # quick: the pieces are not measured
+    lines += [
         "",
         "| variant | ms/run (1 core) | predictions/run | predictor steps/run | steps/prediction "
         "| useful evals / bare | failed | downrange std (km) | crossrange std (km) |",
@@ -426,10 +455,11 @@ def run(quick: bool = False, measure_100k: bool = False) -> dict:
         "useful evaluations: 4 per truth RK4 step to each run's chute, 4 per predictor RK4 "
         "step; the predictor's steps are longer (8 s, 32 s coast) than the truth's (0.5 s), "
         "so doing less of them lowers this rate's numerator and the wall time together",
-        "corrector cycles beyond their useful steps: under vmap each of the corrector's fixed "
-        "prediction slots runs as long as the slowest run still predicting in it; the "
+        "lock-step waiting: under vmap each of the corrector's fixed prediction slots runs as "
+        "long as the slowest run still predicting in it; the "
         f"'{IDENTICAL}' row measures the loop without that waiting (the same run in every "
-        "lane, so no lane waits for another)",
+        "lane, so no lane waits for another); the corrector's time beyond that, per predictor "
+        "step, is the waiting",
         "paper: 39.3 predictions per trajectory (seed 003, 1000 runs)",
     ]
     if any(r["extrapolated"] for r in scale):
