@@ -101,6 +101,7 @@ def main(argv=None):
             print(res["markdown"], flush=True)
             print(f"({res['seconds']:.0f} s, peak memory {res['peak_rss_mb']:.0f} MB)", flush=True)
     doc = dict(machine=machine, commit=commit, quick=args.quick, date=time.strftime("%Y-%m-%d"))
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(dict(doc, results=results), indent=1, default=float))
     md = [
         f"# Benchmark results\n\nMachine: {machine}. Commit {commit}, {doc['date']}"

@@ -22,9 +22,13 @@ def _axpy(a, x, y):
     return jax.tree_util.tree_map(lambda xi, yi: yi + a * xi, x, y)
 
 
-def rk4_step(f: VectorField, t, y, dt, args=None):
-    """One classical 4th-order Runge-Kutta step of size ``dt`` from ``(t, y)``."""
-    k1 = f(t, y, args)
+def rk4_step(f: VectorField, t, y, dt, args=None, k1=None):
+    """One classical 4th-order Runge-Kutta step of size ``dt`` from ``(t, y)``.
+
+    ``k1``: ``f(t, y, args)`` if the caller has it already (evaluated at the end of its
+    previous step, "first same as last"), which saves one evaluation."""
+    if k1 is None:
+        k1 = f(t, y, args)
     k2 = f(t + 0.5 * dt, _axpy(0.5 * dt, k1, y), args)
     k3 = f(t + 0.5 * dt, _axpy(0.5 * dt, k2, y), args)
     k4 = f(t + dt, _axpy(dt, k3, y), args)

@@ -227,7 +227,8 @@ def run_study(
         scenario: from :func:`gnc_jax.load_scenario`.
         runs: number of runs (default: the scenario's paper run count).
         seed: root seed (default: the scenario's).
-        chunk_size: runs per compiled call (default: all runs in chunks of at most 1024).
+        chunk_size: runs per compiled call (default: equal chunks of at most the system's
+            ``chunk_per_device`` runs per device, or 1024 runs).
         progress: show a progress bar (default: when stderr is a terminal and there are
             several chunks).
         n_devices: host devices to shard over (default: all).
@@ -274,10 +275,12 @@ def run_study(
         print(f"{scenario.name}: estimated {cost}", file=sys.stderr)
     sim, law = build(scenario)
     fn, n_dev = batch_function(system, n_devices)
-    default_chunk = 1024
+    default_chunk = system.chunk_per_device * n_dev if system.chunk_per_device else 1024
     if chunk_size is None and announce:  # chunks of about 10 s: a progress bar with an ETA
-        default_chunk = int(max(1, min(1024, 10.0 * runs / cost.seconds)))
+        default_chunk = int(max(1, min(default_chunk, 10.0 * runs / cost.seconds)))
     chunk = min(runs, chunk_size or default_chunk)
+    if chunk_size is None:  # equal chunks: the last one is not mostly padding
+        chunk = -(-runs // -(-runs // chunk))
     chunk = -(-chunk // n_dev) * n_dev  # whole number of runs per device
     n_chunks = -(-runs // chunk)
 
@@ -293,9 +296,17 @@ def run_study(
         bar = tqdm(total=runs, desc=scenario.name, unit="run", disable=not show)
     parts = []
     t0 = time.perf_counter()
+
+    def launch(c):
+        return compiled(sim, law, seed_arr, jnp.arange(c * chunk, (c + 1) * chunk))
+
+    # One chunk ahead: a device that finishes its share of a chunk starts on the next while
+    # the other devices and the host are still on this one.
+    pending = launch(0)
     for c in range(n_chunks):
-        idx = jnp.arange(c * chunk, (c + 1) * chunk)
-        out = jax.block_until_ready(compiled(sim, law, seed_arr, idx))
+        out = pending
+        if c + 1 < n_chunks:
+            pending = launch(c + 1)
         parts.append(jax.tree_util.tree_map(np.asarray, out))
         if bar is not None:
             bar.update(min(chunk, runs - c * chunk))

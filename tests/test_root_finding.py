@@ -222,3 +222,172 @@ def test_gradient_through_the_corrector_is_finite():
     # Where a root exists the secant-based derivative approximates dx/dc = -1/sin(x).
     expected = -1.0 / jnp.sqrt(1.0 - cs[:-1] ** 2)
     np.testing.assert_allclose(grads[:-1], expected, rtol=1e-4)
+
+
+def _sequential_secant_reference(
+    f, x_prev, slope, step, lower, upper, tol, n_bracket, n_iter, decreasing
+):
+    """The secant start and Anderson-Bjorck regula falsi as a plain early-exit Python loop:
+    (x, evaluations, status, slope through the last two evaluations)."""
+    monotone = 1.0 if decreasing else -1.0
+    reach = n_bracket * step
+
+    def usable(s):
+        return math.isfinite(s) and monotone * s < 0.0
+
+    x0 = min(max(x_prev, lower), upper)
+    evaluated = [(x0, f(x0))]
+    f0 = evaluated[0][1]
+
+    def result(status):
+        best = min(evaluated, key=lambda p: abs(p[1]))[0]
+        (x1, f1), (x2, f2) = evaluated[-1], evaluated[-2 if len(evaluated) > 1 else -1]
+        new_slope = (f1 - f2) / (x1 - x2) if x1 != x2 else slope
+        return best, len(evaluated), status, new_slope
+
+    if abs(f0) < tol:
+        return result(RootStatus.ok)
+    up = monotone * f0 >= 0
+    direction, bound = (1.0, upper) if up else (-1.0, lower)
+    secant = usable(slope)
+
+    def secant_from(x, fx, s):
+        if not usable(s):
+            return x + direction * step
+        return x + min(max(-fx / s, -reach), reach)
+
+    same, before, bracket = (x0, f0), None, None
+    x_next = secant_from(x0, f0, slope) if secant else None
+    if x0 != bound:
+        for n in range(1, n_bracket + 1):
+            x_n = x_next if secant else x0 + direction * n * step
+            x_n = min(x_n, upper) if up else max(x_n, lower)
+            f_n = f(x_n)
+            evaluated.append((x_n, f_n))
+            if abs(f_n) < tol:
+                return result(RootStatus.ok)
+            if np.sign(f_n) != np.sign(f0):
+                bracket = sorted([same, (x_n, f_n)])
+                last_kept = 1 if x_n < same[0] else -1
+                break
+            before, same = same, (x_n, f_n)
+            if x_n == bound:
+                break
+            if secant:
+                s = (
+                    (same[1] - before[1]) / (same[0] - before[0])
+                    if same[0] != before[0]
+                    else math.nan
+                )
+                x_next = secant_from(same[0], same[1], s)
+    if bracket is None:
+        return result(RootStatus.not_bracketed)
+    (a, fa), (b, fb) = bracket
+    for _ in range(n_iter):
+        c = min(max((a * fb - b * fa) / (fb - fa), a), b)
+        fc = f(c)
+        evaluated.append((c, fc))
+        if abs(fc) < tol:
+            return result(RootStatus.ok)
+        replace_a = np.sign(fc) == np.sign(fa)
+        kept = 1 if replace_a else -1
+        m = 1.0 - fc / (fa if replace_a else fb)
+        m = m if 0.0 < m < 1.0 else 0.5
+        if replace_a:
+            if last_kept == kept:
+                fb *= m
+            a, fa = c, fc
+        else:
+            if last_kept == kept:
+                fa *= m
+            b, fb = c, fc
+        last_kept = kept
+    return result(RootStatus.no_convergence)
+
+
+SLOPE_FACTORS = [1.0, 0.6, 1.7, -1.0, math.nan]  # exact, too flat, too steep, wrong sign, unknown
+
+
+@pytest.mark.parametrize("factor", SLOPE_FACTORS)
+@pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
+def test_secant_start_matches_brentq_and_sequential_loop(case, factor):
+    """The secant mode (a slope from the previous solve) with Anderson-Bjorck regula falsi
+    against scipy's brentq root and an independent early-exit Python loop, for slopes that
+    are exact at the start, off by a factor, of the wrong sign (eq. 15 steps) or unknown."""
+    _, f_jax, f_np, decreasing, lower, upper, x_prev, step = case
+    tol, n_bracket, n_iter = 1e-11, 40, 60
+    h = 1e-7
+    slope = factor * (f_np(x_prev + h) - f_np(x_prev - h)) / (2 * h)
+    result = jax.jit(
+        lambda x, s: bounded_regula_falsi(
+            f_jax,
+            x,
+            step,
+            lower,
+            upper,
+            tol,
+            n_bracket,
+            n_iter,
+            decreasing=decreasing,
+            slope=s,
+            anderson_bjorck=True,
+        )
+    )(x_prev, slope)
+    root = brentq(f_np, lower, upper, xtol=1e-15, rtol=4 * np.finfo(float).eps)
+    assert int(result.status) == RootStatus.ok
+    assert float(result.x) == pytest.approx(root, abs=1e-9)
+    x_ref, n_ref, status_ref, slope_ref = _sequential_secant_reference(
+        f_np, x_prev, slope, step, lower, upper, tol, n_bracket, n_iter, decreasing
+    )
+    assert int(result.n_evals_early_exit) == n_ref
+    assert int(result.status) == status_ref
+    assert float(result.x) == pytest.approx(x_ref, abs=1e-12)
+    # (two last points within 1e-10 of each other: the secant keeps about 5 digits)
+    assert float(result.slope) == pytest.approx(slope_ref, rel=1e-3)
+    # the slope of the last two evaluations is that of f near the root
+    h = 1e-6
+    assert float(result.slope) == pytest.approx(
+        (f_np(root + h) - f_np(root - h)) / (2 * h), rel=0.05
+    )
+
+
+def test_secant_start_needs_fewer_evaluations_near_a_moving_root():
+    """What the corrector sees from one cycle to the next: the root moved a little, the slope
+    of the last cycle is close. The secant start then needs two evaluations where the seed's
+    eq. 15 bracketing needs about four; an unknown slope reproduces eq. 15 exactly."""
+    f = lambda x: 1.0e3 * (jnp.exp(-2.0 * x) - 0.3)  # noqa: E731  (decreasing, convex)
+    root = -0.5 * math.log(0.3)
+    x_prev, slope = root - 0.02, -2.0e3 * 0.3 * 1.05  # last cycle's root and slope
+    common = dict(step=0.0873, lower=0.0, upper=math.pi, tol=5.0, n_bracket=6, n_iter=6)
+    seed = bounded_regula_falsi(f, x_prev, **common)
+    secant = bounded_regula_falsi(f, x_prev, slope=slope, anderson_bjorck=True, **common)
+    unknown = bounded_regula_falsi(f, x_prev, slope=jnp.nan, **common)
+    assert int(seed.status) == int(secant.status) == RootStatus.ok
+    assert int(secant.n_evals_early_exit) == 2 < int(seed.n_evals_early_exit)
+    for name in ("x", "f_x", "n_evals_early_exit", "status"):
+        np.testing.assert_array_equal(getattr(unknown, name), getattr(seed, name))
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
+def test_anderson_bjorck_needs_no_more_evaluations_than_illinois(case):
+    """Both are regula falsi on the same bracket and find brentq's root; the Anderson-Bjorck
+    factor never costs evaluations against the Illinois 1/2 on these functions."""
+    _, f_jax, f_np, decreasing, lower, upper, x_prev, step = case
+    common = dict(tol=1e-10, n_bracket=40, n_iter=200, decreasing=decreasing)
+    illinois = bounded_regula_falsi(f_jax, x_prev, step, lower, upper, **common)
+    ab = bounded_regula_falsi(f_jax, x_prev, step, lower, upper, anderson_bjorck=True, **common)
+    root = brentq(f_np, lower, upper, xtol=1e-15, rtol=4 * np.finfo(float).eps)
+    assert int(ab.status) == int(illinois.status) == RootStatus.ok
+    assert float(ab.x) == pytest.approx(root, abs=1e-9)
+    assert int(ab.n_evals_early_exit) <= int(illinois.n_evals_early_exit)
+
+
+def test_anderson_bjorck_beats_illinois_on_a_skip_like_range_error():
+    # decreasing and convex, like the predicted range against the bank
+    f = lambda x: 5e3 * jnp.exp(-3.0 * x) - 1e3 * x - 500.0  # noqa: E731
+    common = dict(tol=1e-4, n_bracket=20, n_iter=200)
+    illinois = bounded_regula_falsi(f, 0.0, 0.5, 0.0, 3.0, **common)
+    ab = bounded_regula_falsi(f, 0.0, 0.5, 0.0, 3.0, anderson_bjorck=True, **common)
+    assert int(ab.status) == int(illinois.status) == RootStatus.ok
+    assert abs(float(ab.x) - float(illinois.x)) < 1e-6
+    assert int(ab.n_evals_early_exit) < int(illinois.n_evals_early_exit)

@@ -231,6 +231,53 @@ def _build_us76_table() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 _US76_ALT_M, _US76_LOG_RHO, _US76_DLOG_RHO = _build_us76_table()
 
 
+def _build_bucket_index(nodes: np.ndarray, width: float, margin: float = 1.0) -> np.ndarray:
+    """Uniform buckets over the node range, so that locating an altitude needs no search.
+
+    Bucket b covers [nodes[0] + b width, nodes[0] + (b + 1) width). Row b holds ``first``, the
+    index of the last node at or below the bucket's start minus ``margin`` (-1 if none), then
+    the nodes that follow it up to the bucket's end plus ``margin`` (padded with +inf): the
+    node interval of an altitude in bucket b is ``first`` plus the number of those nodes at or
+    below it -- exactly ``searchsorted(nodes, alt, "right") - 1`` (the margin absorbs the
+    rounding of the bucket number near a bucket edge)."""
+    n_buckets = int(np.ceil((nodes[-1] - nodes[0]) / width)) + 1
+    start = nodes[0] + width * np.arange(n_buckets)
+    first = np.searchsorted(nodes, start - margin, side="right") - 1
+    last = np.searchsorted(nodes, start + width + margin, side="right") - 1
+    extra = int(np.max(last - first))
+    padded = np.concatenate([nodes, np.full(extra, np.inf)])
+    following = padded[np.clip(first[:, None] + np.arange(1, extra + 1), 0, None)]
+    following[following > (start + width + margin)[:, None]] = np.inf
+    return np.concatenate([first[:, None].astype(float), following], axis=1)
+
+
+def _build_interval_rows(nodes, log_rho, slope) -> np.ndarray:
+    """Row k: (x_k, h_k = x_{k+1} - x_k, ln rho_k, slope_k, ln rho_{k+1}, slope_{k+1})."""
+    return np.stack(
+        [nodes[:-1], np.diff(nodes), log_rho[:-1], slope[:-1], log_rho[1:], slope[1:]], axis=1
+    )
+
+
+_US76_BUCKET_M = 250.0  # the table's finest regular spacing: at most a layer base is added
+_US76_BUCKETS = _build_bucket_index(_US76_ALT_M, _US76_BUCKET_M)
+_US76_ROWS = _build_interval_rows(_US76_ALT_M, _US76_LOG_RHO, _US76_DLOG_RHO)
+
+
+def _us76_interval(alt):
+    """Index k of the node interval [nodes[k], nodes[k+1]) holding ``alt``, clipped to the
+    table: ``clip(searchsorted(nodes, alt, "right") - 1, 0, n - 2)``, found by one bucket row
+    and a few comparisons (a binary search under ``vmap`` costs a loop of ten gathers per
+    density, several times the rest of an entry right-hand side)."""
+    top = _US76_BUCKETS.shape[0] - 1
+    b = jnp.floor((alt - _US76_ALT_M[0]) * (1.0 / _US76_BUCKET_M))
+    b = jnp.clip(jnp.where(jnp.isnan(b), top, b), 0, top).astype(jnp.int32)  # NaN: as searchsorted
+    row = jnp.asarray(_US76_BUCKETS)[b]
+    k = row[..., 0].astype(jnp.int32)
+    for j in range(1, _US76_BUCKETS.shape[1]):
+        k = k + (row[..., j] <= alt)
+    return jnp.clip(k, 0, _US76_ROWS.shape[0] - 1)
+
+
 def us76_density(alt_m: Float[Array, "*batch"]) -> Float[Array, "*batch"]:
     """U.S. Standard Atmosphere 1976 density, kg/m^3, at geometric altitude ``alt_m`` (m).
 
@@ -239,21 +286,19 @@ def us76_density(alt_m: Float[Array, "*batch"]) -> Float[Array, "*batch"]:
     Differentiable in ``alt_m`` (C1).
     """
     alt = jnp.asarray(alt_m, dtype=float)
-    nodes = jnp.asarray(_US76_ALT_M)
-    log_rho = jnp.asarray(_US76_LOG_RHO)
-    slope = jnp.asarray(_US76_DLOG_RHO)
-    k = jnp.clip(jnp.searchsorted(nodes, alt, side="right") - 1, 0, nodes.shape[0] - 2)
-    x0, h = nodes[k], nodes[k + 1] - nodes[k]
+    row = jnp.asarray(_US76_ROWS)[_us76_interval(alt)]
+    x0, h, lr0, sl0, lr1, sl1 = (row[..., j] for j in range(6))
     s = (alt - x0) / h
     inside = (
-        log_rho[k] * (1.0 + 2.0 * s) * (1.0 - s) ** 2
-        + slope[k] * h * s * (1.0 - s) ** 2
-        + log_rho[k + 1] * s**2 * (3.0 - 2.0 * s)
-        - slope[k + 1] * h * s**2 * (1.0 - s)
+        lr0 * (1.0 + 2.0 * s) * (1.0 - s) ** 2
+        + sl0 * h * s * (1.0 - s) ** 2
+        + lr1 * s**2 * (3.0 - 2.0 * s)
+        - sl1 * h * s**2 * (1.0 - s)
     )
-    below = log_rho[0] + slope[0] * (alt - nodes[0])
-    above = log_rho[-1] + slope[-1] * (alt - nodes[-1])
-    log_density = jnp.where(alt < nodes[0], below, jnp.where(alt > nodes[-1], above, inside))
+    z0, z1 = _US76_ALT_M[0], _US76_ALT_M[-1]
+    below = _US76_LOG_RHO[0] + _US76_DLOG_RHO[0] * (alt - z0)
+    above = _US76_LOG_RHO[-1] + _US76_DLOG_RHO[-1] * (alt - z1)
+    log_density = jnp.where(alt < z0, below, jnp.where(alt > z1, above, inside))
     return jnp.exp(log_density)
 
 

@@ -23,10 +23,13 @@ from ..dynamics.entry import (
     G0,
     EarthModel,
     EntryState,
+    EntryStateXYZ,
     EntryVehicle,
     aerodynamic_acceleration,
     altitude,
     earth_relative_velocity,
+    earth_relative_velocity_xyz,
+    entry_acceleration_xyz,
     gravity_acceleration,
     sensed_load_g,
 )
@@ -61,14 +64,31 @@ class EntryModel(eqx.Module):
         )
         return EntryState(y.v, a)
 
-    def load_g(self, y: EntryState) -> Scalar:
-        """Sensed load N_g (g) under the model's drag and lift ratios."""
-        vehicle = eqx.tree_at(
+    def measured_vehicle(self) -> EntryVehicle:
+        """The vehicle with the measured drag and lift ratios applied."""
+        return eqx.tree_at(
             lambda x: (x.lift_scale, x.drag_scale),
             self.vehicle,
             (self.vehicle.lift_scale * self.lift_ratio, self.vehicle.drag_scale * self.drag_ratio),
         )
-        return sensed_load_g(y.r, y.v, vehicle, self.earth, self.atmosphere)
+
+    def load_g(self, y: EntryState) -> Scalar:
+        """Sensed load N_g (g) under the model's drag and lift ratios."""
+        return sensed_load_g(y.r, y.v, self.measured_vehicle(), self.earth, self.atmosphere)
+
+    def vertical_plane_xyz(self, y: EntryStateXYZ, cos_bank, density=None):
+        """:meth:`vertical_plane_field` on components, and the density it used (which may be
+        given, see :func:`~gnc_jax.dynamics.entry.entry_acceleration_xyz`)."""
+        accel, density = entry_acceleration_xyz(
+            y, self.measured_vehicle(), self.earth, self.atmosphere, cos_bank, density=density
+        )
+        return EntryStateXYZ(y.v, accel), density
+
+    def load_g_xyz(self, density, speed_mps) -> Scalar:
+        """Sensed load N_g (g) at a density (kg/m^3) and Earth-relative speed (m/s)."""
+        v = self.measured_vehicle()
+        c_r = jnp.sqrt(v.c_l**2 + v.c_d**2)
+        return 0.5 * density * speed_mps**2 * v.reference_area_m2 * c_r / (v.mass_kg * G0)
 
 
 class EntryNav(NamedTuple):
@@ -89,6 +109,11 @@ class EntryGuidanceContext(eqx.Module):
         hold_bank_rad: bank held before guidance starts.
         ratio_filter_gain: gain per control step of the measured drag/lift ratio filter.
         pc_every: control steps per predictor-corrector cycle.
+        cycle_start: whether this control step starts a predictor-corrector cycle, when the
+            caller keeps the clock (a simulator looping over cycles of ``pc_every`` steps: a
+            flag it knows for every run at once, so that under ``vmap`` the corrector stays a
+            ``lax.cond`` instead of running, masked, at every step); ``None``: the law counts
+            its own steps (``step % pc_every == 0``), the same schedule.
     """
 
     model: EntryModel
@@ -96,6 +121,7 @@ class EntryGuidanceContext(eqx.Module):
     hold_bank_rad: Scalar
     ratio_filter_gain: Scalar
     pc_every: int = eqx.field(static=True, default=4)
+    cycle_start: Array | None = None
 
 
 class EntryGuidanceLog(NamedTuple):
@@ -164,6 +190,17 @@ def flight_variables(y: EntryState, earth: EarthModel) -> FlightVariables:
     return FlightVariables(
         speed, jnp.arcsin(jnp.clip(hdot / speed, -1, 1)), altitude(y.r, earth), hdot
     )
+
+
+def altitude_speed_hdot(y: EntryStateXYZ, earth: EarthModel) -> tuple[Scalar, Scalar, Scalar]:
+    """Altitude (m), Earth-relative speed (m/s) and Ḣ (m/s) of a component state: the
+    :func:`flight_variables` an inner loop needs, without trigonometry."""
+    r2 = y.r[0] ** 2 + y.r[1] ** 2 + y.r[2] ** 2
+    inv_r = jax.lax.rsqrt(r2)
+    v_rel = earth_relative_velocity_xyz(y.r, y.v, earth)
+    speed = jnp.sqrt(v_rel[0] ** 2 + v_rel[1] ** 2 + v_rel[2] ** 2)
+    hdot = (y.r[0] * v_rel[0] + y.r[1] * v_rel[1] + y.r[2] * v_rel[2]) * inv_r
+    return r2 * inv_r - earth.equatorial_radius_m, speed, hdot
 
 
 def drag_and_lift(

@@ -39,7 +39,14 @@ import jax
 import jax.numpy as jnp
 
 from .._types import Array, Float, Scalar
-from ..dynamics.entry import G0, EntryState, entry_state_from_conditions
+from ..dynamics.entry import (
+    G0,
+    EntryState,
+    EntryStateXYZ,
+    entry_state_from_conditions,
+    from_xyz,
+    to_xyz,
+)
 from ..geometry.sphere import (
     along_cross_track,
     along_track_to_go,
@@ -61,6 +68,7 @@ from .entry_common import (
     EntryModel,
     EntryNav,
     FlightVariables,
+    altitude_speed_hdot,
     drag_and_lift,
     flight_variables,
     ground_range_m,
@@ -109,13 +117,21 @@ class ReferenceTrajectory(eqx.Module):
     range_per_cos_bank_m: Float[Array, " n"]
     time_to_go_s: Float[Array, " n"]
 
+    def _interpolator(self, speed):
+        """Linear interpolation in the table at ``speed``, clamped to its ends: the function
+        ``table -> value``. The speed grid is uniform (:func:`tabulate_reference`), so the
+        interval is found by arithmetic, not by a search (a loop of gathers under ``vmap``);
+        equal to ``jnp.interp`` up to rounding."""
+        v = self.velocity_mps
+        n = v.shape[0]
+        x = jnp.clip((v[0] - speed) / (v[0] - v[-1]) * (n - 1), 0.0, n - 1.0)
+        i = jnp.clip(jnp.floor(x).astype(jnp.int32), 0, n - 2)
+        w = x - i
+        return lambda table: table[i] + w * (table[i + 1] - table[i])
+
     def sensitivities(self, speed):
         """(dR/dN_gx, dR/dḢ, dR/dcos sigma, time to go) of the reference at ``speed``."""
-        xp = self.velocity_mps[::-1]
-
-        def f(table):
-            return jnp.interp(speed, xp, table[::-1])
-
+        f = self._interpolator(speed)
         return (
             f(self.range_per_drag_load_m),
             f(self.range_per_hdot_s),
@@ -125,11 +141,7 @@ class ReferenceTrajectory(eqx.Module):
 
     def lookup(self, speed):
         """(bank, range to go, Ḣ, N_gx, Ṡ) of the reference at ``speed`` (clamped)."""
-        xp = self.velocity_mps[::-1]
-
-        def f(table):
-            return jnp.interp(speed, xp, table[::-1])
-
+        f = self._interpolator(speed)
         return (
             f(self.bank_rad),
             f(self.range_to_go_m),
@@ -137,6 +149,10 @@ class ReferenceTrajectory(eqx.Module):
             f(self.drag_load_g),
             f(self.range_rate_mps),
         )
+
+    def bank_at(self, speed):
+        """The reference bank (rad) at ``speed``: ``lookup(speed)[0]``."""
+        return self._interpolator(speed)(self.bank_rad)
 
     def second_entry_range(self, fv: FlightVariables) -> Scalar:
         """Seed 003 eq. 10: S2 = S_std2 + dF/dv dv + dF/dtheta dtheta + dF/dH dH, m."""
@@ -173,6 +189,10 @@ class SkipEntryState(NamedTuple):
         drag_ratio, lift_ratio: filtered ratios of measured to modelled drag and lift.
         last_status: :class:`~gnc_jax.root_finding.RootStatus` of the last corrector cycle.
         predicted_crossrange: crossrange at the switch point of the last corrector solution, m.
+        corrector_slope: d(predicted range error)/d sigma_0 of the last corrector cycle (the
+            secant through its last two predictions), m/rad; NaN before the first.
+        plan_speed: Earth-relative speed at the last corrector solution, m/s (NaN before the
+            first): the start v_0 of the profile it planned.
         step: control steps taken; the corrector runs when ``step % pc_every == 0``.
         log: the diagnostics of the outcome and the trace.
     """
@@ -187,6 +207,8 @@ class SkipEntryState(NamedTuple):
     lift_ratio: Scalar
     last_status: Array
     predicted_crossrange: Scalar
+    corrector_slope: Scalar
+    plan_speed: Scalar
     step: Array
     log: EntryGuidanceLog
 
@@ -199,17 +221,32 @@ class _PhaseEvents(NamedTuple):
     to_track: Array  # 1 or 2 -> 3: the switch point
 
 
+class _Point(NamedTuple):
+    """A predictor state with what the end-point location needs: altitude (m), Ḣ (m/s) and
+    sensed load (g)."""
+
+    y: EntryStateXYZ
+    altitude_m: Scalar
+    hdot_mps: Scalar
+    ng: Scalar
+
+
 class _PredictorState(NamedTuple):
-    y: EntryState
-    t: Scalar
+    """Loop state of a prediction. ``now`` is the state reached, ``dy`` its derivative with
+    the bank at ``now`` (the next step's first stage), ``before`` the state one step earlier:
+    the end point (switch or chute) is located inside that last step after the loop."""
+
+    now: _Point
+    dy: EntryStateXYZ
+    cos_bank: Scalar  # cosine of the bank flown from ``now``
+    before: _Point
+    t: Scalar  # time of ``now``
+    dt: Scalar  # length of the step from ``before`` to ``now``
     pulled_up: Array
     kepler: Array
     second: Array
-    ng: Scalar
     kind: Array  # -1 running, else that of Prediction (3: inactive, no step taken)
     k: Array
-    y_end: EntryState
-    t_end: Scalar
 
 
 @register_law("skip_entry")
@@ -363,7 +400,37 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         static=True,
         doc="RK4 step of the predictor (see benchmarks/entry_integrators.py)",
     )
+    predictor_coast_dt_s: float = param(
+        32.0,
+        lo=0.01,
+        hi=120.0,
+        units="s",
+        static=True,
+        doc="RK4 step of the predictor while the load is below predictor_coast_load_g (the "
+        "Kepler arc, where drag is small; see benchmarks/entry_integrators.py)",
+    )
+    predictor_coast_load_g: Scalar = param(
+        0.02,
+        lo=0.0,
+        hi=5.0,
+        units="g",
+        doc="load below which the predictor takes its coast step (below the Kepler-phase load)",
+    )
     predictor_max_steps: int = param(1000, lo=10, hi=100000, doc="predictor step budget")
+    predictor_bank: str = param(
+        "step",
+        choices=("step", "stage"),
+        doc="bank of the predicted profile: 'step' (held over each RK4 step, as flown) or "
+        "'stage' (at every RK4 stage: 4th order, about 100 times smaller prediction error at "
+        "8 s steps, twice the cost per step; see benchmarks/entry_integrators.py)",
+    )
+    corrector_start: str = param(
+        "secant",
+        choices=("secant", "bracket"),
+        doc="corrector start: 'secant' (warm start on the last solution's planned profile, then "
+        "a secant step on the last cycle's slope) or 'bracket' (the last solution, then the Δσ "
+        "step of eq. 15, as the seed)",
+    )
     n_bracket: int = param(6, lo=1, hi=100, doc="bracketing steps of the corrector")
     n_iter: int = param(6, lo=1, hi=100, doc="regula-falsi iterations of the corrector")
 
@@ -372,6 +439,14 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         if section["bank_min_deg"] >= section["bank_max_deg"]:
             raise ScenarioError(
                 "guidance.skip_entry.bank_min_deg: must be < guidance.skip_entry.bank_max_deg"
+            )
+        if section["predictor_coast_load_g"] >= section["kepler_load_g"]:
+            # the switch point (the load rising through kepler_load_g) is located in a step
+            # of predictor_dt_s only if the coast steps stop below it
+            raise ScenarioError(
+                "guidance.skip_entry.predictor_coast_load_g: "
+                f"{section['predictor_coast_load_g']:g} g; allowed: below "
+                f"guidance.skip_entry.kepler_load_g = {section['kepler_load_g']:g} g"
             )
         altitude = config["entry"]["altitude_km"]
         if section["skip_out_altitude_km"] <= altitude:
@@ -425,7 +500,8 @@ class SkipEntryGuidance(AbstractEntryGuidance):
     ) -> Prediction:
         """Predicted range error of the bank profile ``sigma_0`` (seed 003 §3.1), m.
 
-        Integrates the vertical-plane dynamics (RK4, ``predictor_dt_s``) from ``(y, t)`` with
+        Integrates the vertical-plane dynamics (RK4, ``predictor_dt_s``; ``predictor_coast_dt_s``
+        at low load) from ``(y, t)`` with
         the first-entry profile. The prediction normally stops at the switch point — the end of
         the Kepler phase: after the pull-up the load fell below ``kepler_load_g`` and has just
         risen above it again — and returns S2(eq. 10 at the switch state) minus the range
@@ -435,20 +511,29 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         prediction that never pulls up. A climb above ``skip_out_altitude_m`` or running out
         of steps returns a large overshoot. Under ``vmap`` the ``while_loop`` runs while one
         active run still integrates; an inactive run does no step.
+
+        The state is integrated as components, each step reusing the derivative evaluated at
+        the end of the previous one (four right-hand sides per step, the fourth also giving
+        the load); the end point is located inside the last step once, after the loop.
         """
-        v_0 = flight_variables(y, model.earth).speed_mps
+        y_xyz = to_xyz(y)
+        alt, v_0, hdot = altitude_speed_hdot(y_xyz, model.earth)
+        cos_b = jnp.cos(self.profile(sigma_0, v_0, v_0))
+        dy, density = model.vertical_plane_xyz(y_xyz, cos_b)
+        start = _Point(y_xyz, alt, hdot, model.load_g_xyz(density, v_0))
         f = jnp.asarray(False)
         c0 = _PredictorState(
-            y=y,
+            now=start,
+            dy=dy,
+            cos_bank=cos_b,
+            before=start,
             t=jnp.asarray(t, float),
+            dt=jnp.zeros(()),
             pulled_up=jnp.asarray(pulled_up),
             kepler=f,
             second=f,
-            ng=model.load_g(y),
-            kind=jnp.where(active, -1, 3),
-            k=jnp.asarray(0),
-            y_end=y,
-            t_end=jnp.asarray(t, float),
+            kind=jnp.where(active, -1, 3).astype(jnp.int32),
+            k=jnp.asarray(0, jnp.int32),
         )
         c = jax.lax.while_loop(
             lambda c: (c.kind < 0) & (c.k < self.predictor_max_steps),
@@ -457,73 +542,103 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         )
         return self._prediction(c, y, t, model, target_fixed)
 
-    def _predictor_step(self, c: "_PredictorState", sigma_0, v_0, model) -> "_PredictorState":
-        """One RK4 step of the prediction, and the end point if it lies inside the step."""
-        earth = model.earth
+    def _bank(self, second, sigma_0, v_0, speed):
+        """Bank magnitude the prediction flies: the first-entry profile, or the reference
+        after a skip without a Kepler phase (``second``)."""
+        return jnp.where(second, self.reference.bank_at(speed), self.profile(sigma_0, v_0, speed))
+
+    def _predictor_step(self, c: _PredictorState, sigma_0, v_0, model) -> _PredictorState:
+        """One RK4 step of the prediction and its phase logic. The bank is held over the step
+        at its value at the step's start (``predictor_bank = "step"``, a first-order error in
+        the step) or follows the profile at every stage (``"stage"``).
+
+        The step is ``predictor_dt_s``, or ``predictor_coast_dt_s`` while the load is below
+        ``predictor_coast_load_g`` (the high part of the Kepler arc)."""
         dt = self.predictor_dt_s
-        fv = flight_variables(c.y, earth)
-        bank = jnp.where(
-            c.second,
-            self.reference.lookup(fv.speed_mps)[0],
-            self.profile(sigma_0, v_0, fv.speed_mps),
-        )
-        y1 = rk4_step(model.vertical_plane_field, c.t, c.y, dt, jnp.cos(bank))
-        fv1 = flight_variables(y1, earth)
-        ng1 = model.load_g(y1)
-        pulled = c.pulled_up | (fv1.hdot_mps > 0.0)
+        if self.predictor_coast_dt_s != dt:
+            dt = jnp.where(c.now.ng < self.predictor_coast_load_g, self.predictor_coast_dt_s, dt)
+
+        def field(t, y, _):
+            if self.predictor_bank == "stage":  # the profile at this stage's speed
+                speed = altitude_speed_hdot(y, model.earth)[1]
+                cos_b = jnp.cos(self._bank(c.second, sigma_0, v_0, speed))
+                return model.vertical_plane_xyz(y, cos_b)[0]
+            return model.vertical_plane_xyz(y, c.cos_bank)[0]
+
+        y1 = rk4_step(field, c.t, c.now.y, dt, k1=c.dy)
+        alt1, speed1, hdot1 = altitude_speed_hdot(y1, model.earth)
+        density1 = model.atmosphere.density(alt1)
+        ng1 = model.load_g_xyz(density1, speed1)
+        pulled = c.pulled_up | (hdot1 > 0.0)
         kepler = c.kepler | (pulled & (ng1 < self.kepler_load_g))
-        descending = pulled & (fv1.hdot_mps < 0.0) & (ng1 >= self.kepler_load_g)
+        descending = pulled & (hdot1 < 0.0) & (ng1 >= self.kepler_load_g)
         switch = kepler & descending
         second = c.second | (~kepler & descending)
-        chute = fv1.altitude_m < self.chute_altitude_m
-        skip = fv1.altitude_m > self.skip_out_altitude_m
-        # switch point: linear interpolation of the load crossing inside the step
-        s_sw = jnp.clip(
-            (self.kepler_load_g - c.ng) / jnp.where(ng1 != c.ng, ng1 - c.ng, 1.0), 0.0, 1.0
-        )
-        s_ch = hermite_crossing(
-            fv.altitude_m, fv.hdot_mps, fv1.altitude_m, fv1.hdot_mps, dt, self.chute_altitude_m
-        )
-        s = jnp.where(switch, s_sw, s_ch)
-        y_end = jax.tree_util.tree_map(lambda a, b: a + s * (b - a), c.y, y1)
-        kind = jnp.where(switch, 0, jnp.where(chute, 1, jnp.where(skip, 2, -1)))
+        chute = alt1 < self.chute_altitude_m
+        skip = alt1 > self.skip_out_altitude_m
+        kind = jnp.where(switch, 0, jnp.where(chute, 1, jnp.where(skip, 2, -1))).astype(jnp.int32)
+        cos_b1 = jnp.cos(self._bank(second, sigma_0, v_0, speed1))
+        dy1, _ = model.vertical_plane_xyz(y1, cos_b1, density=density1)
         return _PredictorState(
-            y=y1,
+            now=_Point(y1, alt1, hdot1, ng1),
+            dy=dy1,
+            cos_bank=cos_b1,
+            before=c.now,
             t=c.t + dt,
+            dt=jnp.asarray(dt, float),
             pulled_up=pulled,
             kepler=kepler,
             second=second,
-            ng=ng1,
             kind=kind,
             k=c.k + 1,
-            y_end=y_end,
-            t_end=c.t + s * dt,
         )
 
-    def _prediction(self, c: "_PredictorState", y, t, model, target_fixed) -> Prediction:
+    def _end_point(self, c: _PredictorState):
+        """State and time where a finished prediction ends, inside its last step: the switch
+        point by linear interpolation of the load crossing, else the chute crossing by cubic
+        Hermite interpolation of the altitude (a prediction that took no step: its start)."""
+        dt = self.predictor_dt_s if self.predictor_coast_dt_s == self.predictor_dt_s else c.dt
+        a, b = c.before, c.now
+        s_sw = jnp.clip(
+            (self.kepler_load_g - a.ng) / jnp.where(b.ng != a.ng, b.ng - a.ng, 1.0), 0.0, 1.0
+        )
+        s_ch = hermite_crossing(
+            a.altitude_m, a.hdot_mps, b.altitude_m, b.hdot_mps, dt, self.chute_altitude_m
+        )
+        s = jnp.where(c.kind == 0, s_sw, s_ch)
+        y_end = jax.tree_util.tree_map(lambda p, q: p + s * (q - p), a.y, b.y)
+        t_end = jnp.where(c.k > 0, c.t - dt + s * dt, c.t)
+        return from_xyz(y_end), t_end
+
+    def _prediction(self, c: _PredictorState, y, t, model, target_fixed) -> Prediction:
         """Range error and crossrange of a finished prediction started at ``(y, t)``."""
         earth = model.earth
+        y_end, t_end = self._end_point(c)
         kind = jnp.where(c.kind < 0, 2, c.kind)  # out of steps: treat as a skip-out
         r_e = earth.equatorial_radius_m
         # Signed along-track position of the end point relative to the target, on the great
         # circle from here to the target (> 0 beyond it): a long skip that passes over the
         # target must count as an overshoot, which an unsigned distance would not.
         here = unit(to_earth_fixed(y.r, t, earth.rotation_rate))
-        end = unit(to_earth_fixed(c.y_end.r, c.t_end, earth.rotation_rate))
+        end = unit(to_earth_fixed(y_end.r, t_end, earth.rotation_rate))
         beyond = r_e * along_cross_track(end, here, target_fixed)[0]
-        s2 = self.reference.second_entry_range(flight_variables(c.y_end, earth))
+        s2 = self.reference.second_entry_range(flight_variables(y_end, earth))
         overshoot = 2.0 * self.reference.range_to_go_m[0] + 1.0e7
         miss = jnp.where(kind == 0, s2 + beyond, jnp.where(kind == 1, beyond, overshoot))
-        target = to_inertial(target_fixed, c.t_end, earth.rotation_rate)
-        v_rel = c.y_end.v - jnp.cross(earth.angular_velocity(), c.y_end.r)
-        chi = r_e * crossrange_to_target(c.y_end.r, v_rel, target)
+        target = to_inertial(target_fixed, t_end, earth.rotation_rate)
+        v_rel = y_end.v - jnp.cross(earth.angular_velocity(), y_end.r)
+        chi = r_e * crossrange_to_target(y_end.r, v_rel, target)
         return Prediction(miss, chi, kind, c.k)
 
-    def correct(self, y, t, pulled_up, sigma_prev, model, target_fixed, enabled):
+    def correct(self, y, t, pulled_up, sigma_prev, model, target_fixed, enabled, slope=None):
         """Bounded regula falsi on sigma_0 (seed 003 eqs. 11-15), a fixed-iteration loop.
 
-        The result's ``aux`` is the predicted crossrange at the switch point of the solution,
-        its ``cost`` the number of predictor RK4 steps taken by all predictions of the cycle."""
+        Warm-started at the previous solution; with ``corrector_start = "secant"`` and the
+        previous cycle's ``slope`` (m/rad), a miss of the warm start is followed by the secant
+        step on that slope instead of the Δσ step of eq. 15. The result's ``aux`` is the
+        predicted crossrange at the switch point of the solution, its ``cost`` the number of
+        predictor RK4 steps taken by all predictions of the cycle, its ``slope`` this
+        cycle's."""
 
         def miss(sigma_0, active):
             p = self.predict(y, t, pulled_up, sigma_0, model, target_fixed, active)
@@ -541,6 +656,8 @@ class SkipEntryGuidance(AbstractEntryGuidance):
             illinois=True,
             decreasing=True,
             enabled=enabled,
+            slope=slope if self.corrector_start == "secant" else None,
+            anderson_bjorck=self.corrector_start == "secant",
         )
 
     # ---- reference tracking (seed 003 §2.2, eqs. 6-7, 16-17) ----
@@ -622,6 +739,8 @@ class SkipEntryGuidance(AbstractEntryGuidance):
             lift_ratio=jnp.ones(()),
             last_status=zi,
             predicted_crossrange=z,
+            corrector_slope=jnp.full((), jnp.nan),
+            plan_speed=jnp.full((), jnp.nan),
             step=zi,
             log=log,
         )
@@ -647,7 +766,9 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         bank_offset = jnp.where(
             events.to_track, self.switch_compensation(fv, to_go), state.bank_offset
         )
-        res, did_pc = self._corrector_cycle(state, y, t, ctx, model, pulled, live & (phase == 1))
+        res, did_pc = self._corrector_cycle(
+            state, y, t, fv.speed_mps, ctx, model, pulled, live & (phase == 1)
+        )
         sigma_0 = jnp.where(did_pc, res.x, state.sigma_0)
         chi_switch = jnp.where(did_pc, res.aux, state.predicted_crossrange)
 
@@ -687,6 +808,8 @@ class SkipEntryGuidance(AbstractEntryGuidance):
             lift_ratio=lift_ratio,
             last_status=jnp.where(did_pc, res.status, state.last_status),
             predicted_crossrange=chi_switch,
+            corrector_slope=jnp.where(did_pc, res.slope, state.corrector_slope),
+            plan_speed=jnp.where(did_pc, fv.speed_mps, state.plan_speed),
             step=state.step + 1,
             log=log,
         )
@@ -732,13 +855,32 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         phase = jnp.where(to_track, 3, phase)
         return phase, pulled, _PhaseEvents(start, to_kepler, to_track)
 
-    def _corrector_cycle(self, state: SkipEntryState, y, t, ctx, model, pulled, active):
+    def warm_start(self, state: SkipEntryState, speed):
+        """The corrector's first guess at ``speed``: with ``corrector_start = "secant"`` the
+        bank the last solution's profile planned for this speed (the root it would have
+        if the flight went as planned), else the last solution sigma_0 itself (seed 003)."""
+        if self.corrector_start != "secant":
+            return state.sigma_0
+        planned = self.profile(state.sigma_0, state.plan_speed, speed)
+        return jnp.where(jnp.isnan(state.plan_speed), state.sigma_0, planned)
+
+    def _corrector_cycle(self, state: SkipEntryState, y, t, speed, ctx, model, pulled, active):
         """The corrector on a predictor-corrector step (every ``pc_every`` control steps),
         else the previous solution. Returns the result and whether it is a new solution: only
         an ``active`` run (in phase 1) does any work."""
 
         def pc(_):
-            return self.correct(y, t, pulled, state.sigma_0, model, ctx.target_fixed, active)
+            res = self.correct(
+                y,
+                t,
+                pulled,
+                self.warm_start(state, speed),
+                model,
+                ctx.target_fixed,
+                active,
+                state.corrector_slope,
+            )
+            return res._replace(slope=jnp.asarray(res.slope, dtype=float))
 
         def no_pc(_):
             z = jnp.zeros((), int)
@@ -751,11 +893,16 @@ class SkipEntryGuidance(AbstractEntryGuidance):
                 status=z,
                 aux=state.predicted_crossrange,
                 cost=jnp.zeros(()),
+                slope=state.corrector_slope,
             )
 
-        is_pc_step = (state.step % ctx.pc_every) == 0
+        if ctx.cycle_start is None:
+            is_pc_step = (state.step % ctx.pc_every) == 0
+        else:
+            is_pc_step = ctx.cycle_start
+        active = active & is_pc_step  # (should the cond be batched, an idle step predicts nothing)
         res = jax.lax.cond(is_pc_step, pc, no_pc, None)
-        return res, is_pc_step & active
+        return res, active
 
     def _bank_sign(self, state: SkipEntryState, phase, fv, chi_switch, chi_now, live):
         """Sign of the bank and whether it reverses this step.

@@ -35,11 +35,13 @@ from ..dynamics.entry import (
     EntryArgs,
     EntryConditions,
     EntryState,
+    EntryStateXYZ,
     EntryVehicle,
+    entry_acceleration_xyz,
     entry_state_from_conditions,
-    entry_vector_field,
-    sensed_load_g,
+    from_xyz,
     sutton_graves_heat_rate,
+    to_xyz,
 )
 from ..geometry.sphere import (
     along_cross_track,
@@ -52,6 +54,7 @@ from ..guidance.entry_common import (
     EntryGuidanceContext,
     EntryModel,
     EntryNav,
+    altitude_speed_hdot,
     drag_and_lift,
     flight_variables,
     ground_range_m,
@@ -254,14 +257,20 @@ class Trace(NamedTuple):
 
 
 class _Flight(NamedTuple):
-    """Truth state of the flight, loads and heating, advanced by :func:`_truth_substep`."""
+    """Truth state of the flight, loads and heating, advanced by :func:`_truth_substep`.
 
-    y: EntryState
+    The state is carried as components (:class:`EntryStateXYZ`) with the density at it, which
+    the next step's first right-hand side reuses. The chute crossing is located after the
+    loop, from the step that crossed: its start state, time and bank are kept."""
+
+    y: EntryStateXYZ
+    density: Scalar  # truth density at y, kg/m^3
     t: Scalar
     act: BankActuatorState
     done: Array  # the chute altitude has been crossed
-    chute: EntryState  # state at the crossing
-    t_chute: Scalar
+    cross_y: EntryStateXYZ  # state at the start of the crossing step
+    cross_t: Scalar
+    cross_bank: Scalar  # bank flown over the crossing step
     heat_load: Scalar
     heat_peak: Scalar
     load_peak: Scalar
@@ -328,48 +337,77 @@ def guidance_context(sim: CapsuleSimulation) -> EntryGuidanceContext:
 
 
 def _truth_substep(sim: CapsuleSimulation, args: EntryArgs, command, f: _Flight) -> _Flight:
-    """Bank actuator and one RK4 step of the truth (``args`` without the bank); the chute
-    crossing is located inside the step by cubic Hermite interpolation. A finished flight
-    (``done``) keeps its state and time."""
+    """Bank actuator and one RK4 step of the truth (``args`` without the bank), with the
+    loads and heating at the end of the step. A finished flight (``done``) keeps its state
+    and time; the step that crosses the chute altitude is recorded for :func:`_chute_point`.
+
+    Four density lookups per step: the first stage reuses the density carried from the end
+    of the previous step, whose lookup also gives the heat rate and the load."""
     dt = sim.dt_s
     earth, vehicle, atmosphere = args.earth, args.vehicle, args.atmosphere
     act = sim.actuator.step(f.act, command, dt)
-    args = args._replace(bank=act.bank)
-    y1 = rk4_step(entry_vector_field, f.t, f.y, dt, args)
-    f0 = flight_variables(f.y, earth)
-    f1 = flight_variables(y1, earth)
-    cross = ~f.done & (f1.altitude_m < sim.chute_altitude_m)
-    sfrac = hermite_crossing(
-        f0.altitude_m, f0.hdot_mps, f1.altitude_m, f1.hdot_mps, dt, sim.chute_altitude_m
-    )
-    now = hermite_state(
-        f.y,
-        entry_vector_field(f.t, f.y, args).v,
-        y1,
-        entry_vector_field(f.t + dt, y1, args).v,
-        dt,
-        sfrac,
-    )
-    rho = atmosphere.density(f1.altitude_m)
-    q_dot = sutton_graves_heat_rate(rho, f1.speed_mps, vehicle.nose_radius_m)
-    ng1 = sensed_load_g(y1.r, y1.v, vehicle, earth, atmosphere)
+    cos_b, sin_b = jnp.cos(act.bank), jnp.sin(act.bank)  # constant over the step
+
+    def field(t, y, density=None):
+        accel, _ = entry_acceleration_xyz(
+            y, vehicle, earth, atmosphere, cos_b, sin_b, density=density
+        )
+        return EntryStateXYZ(y.v, accel)
+
+    y1 = rk4_step(field, f.t, f.y, dt, k1=field(f.t, f.y, f.density))
+    alt1, speed1, _ = altitude_speed_hdot(y1, earth)
+    rho1 = atmosphere.density(alt1)
+    q_dot = sutton_graves_heat_rate(rho1, speed1, vehicle.nose_radius_m)
+    c_r = jnp.sqrt(vehicle.c_l**2 + vehicle.c_d**2)
+    ng1 = 0.5 * rho1 * speed1**2 * vehicle.reference_area_m2 * c_r / (vehicle.mass_kg * G0)
+    cross = ~f.done & (alt1 < sim.chute_altitude_m)
     keep = ~f.done
+
+    def unless_done(old, new):
+        return jax.tree_util.tree_map(lambda a, b: jnp.where(f.done, a, b), old, new)
+
+    def if_cross(new, old):
+        return jax.tree_util.tree_map(lambda a, b: jnp.where(cross, a, b), new, old)
+
     return _Flight(
-        y=jax.tree_util.tree_map(lambda a, b: jnp.where(f.done, a, b), f.y, y1),
+        y=unless_done(f.y, y1),
+        density=jnp.where(f.done, f.density, rho1),
         t=f.t + jnp.where(f.done, 0.0, dt),
         act=act,
         done=f.done | cross,
-        chute=jax.tree_util.tree_map(lambda a, b: jnp.where(cross, a, b), now, f.chute),
-        t_chute=jnp.where(cross, f.t + sfrac * dt, f.t_chute),
+        cross_y=if_cross(f.y, f.cross_y),
+        cross_t=jnp.where(cross, f.t, f.cross_t),
+        cross_bank=jnp.where(cross, act.bank, f.cross_bank),
         heat_load=f.heat_load + keep * q_dot * dt,
         heat_peak=jnp.maximum(f.heat_peak, keep * q_dot),
         load_peak=jnp.maximum(f.load_peak, keep * ng1),
     )
 
 
+def _chute_point(sim: CapsuleSimulation, args: EntryArgs, f: _Flight, y0: EntryState):
+    """State and time at the chute altitude: the crossing inside the step that crossed it, by
+    cubic Hermite interpolation (``y0`` and 0 for a flight that never crossed)."""
+    dt, earth = sim.dt_s, args.earth
+    bank = f.cross_bank
+
+    def accel(y):
+        a, _ = entry_acceleration_xyz(
+            y, args.vehicle, earth, args.atmosphere, jnp.cos(bank), jnp.sin(bank)
+        )
+        return jnp.stack(a)
+
+    alt0, _, hdot0 = altitude_speed_hdot(f.cross_y, earth)
+    alt1, _, hdot1 = altitude_speed_hdot(f.y, earth)
+    sfrac = hermite_crossing(alt0, hdot0, alt1, hdot1, dt, sim.chute_altitude_m)
+    y_a, y_b = from_xyz(f.cross_y), from_xyz(f.y)
+    now = hermite_state(y_a, accel(f.cross_y), y_b, accel(f.y), dt, sfrac)
+    chute = jax.tree_util.tree_map(lambda a, b: jnp.where(f.done, a, b), now, y0)
+    return chute, jnp.where(f.done, f.cross_t + sfrac * dt, 0.0)
+
+
 def _trace(y0: EntryState, c: _Carry, nav: EntryNav, command, g, earth) -> Trace:
     """This control step's trace: the state at its start, the command and the new law state."""
-    y, t = c.flight.y, c.flight.t
+    y, t = nav.y, c.flight.t
     fv = flight_variables(y, earth)
     return Trace(
         t_s=t,
@@ -396,7 +434,14 @@ def simulate(sim: CapsuleSimulation, law: AbstractEntryGuidance, key: PRNGKeyArr
 
     Every control step the accelerometers measure the drag and lift of the dispersed vehicle,
     the law commands a bank from them and the navigated (true) state, and the truth flies
-    ``substeps`` RK4 steps with the bank the actuator achieves."""
+    ``substeps`` RK4 steps with the bank the actuator achieves.
+
+    The control steps run in guidance cycles of ``pc_every`` steps whose first runs the
+    corrector: the simulator keeps that clock (``ctx.cycle_start``), the same for every run, so
+    that under ``vmap`` the corrector is a ``lax.cond`` on it. Without ``record`` the cycles
+    are a ``while_loop`` that stops once the flight is down (under ``vmap``: once every run of
+    the batch is; a finished flight is frozen either way, so the outcome is the same), with
+    ``record`` a ``scan`` over the whole ``max_time_s`` for fixed-length traces."""
     y0, vehicle, atmosphere, draws = dispersed_entry(sim, key)
     truth = EntryArgs(vehicle, sim.earth, atmosphere, jnp.zeros(()))
     ctx = guidance_context(sim)
@@ -404,9 +449,10 @@ def simulate(sim: CapsuleSimulation, law: AbstractEntryGuidance, key: PRNGKeyArr
     def measure(y):
         return EntryNav(y, *drag_and_lift(y, vehicle, sim.earth, atmosphere))
 
-    def control_step(c: _Carry, _):
-        nav = measure(c.flight.y)
-        command, g = law.step(c.guidance, nav, c.flight.t, ctx)
+    def control_step(c: _Carry, j):
+        nav = measure(from_xyz(c.flight.y))
+        step_ctx = eqx.tree_at(lambda x: x.cycle_start, ctx, j == 0, is_leaf=lambda x: x is None)
+        command, g = law.step(c.guidance, nav, c.flight.t, step_ctx)
         flight, _ = jax.lax.scan(
             lambda f, _: (_truth_substep(sim, truth, command, f), None),
             c.flight,
@@ -416,24 +462,47 @@ def simulate(sim: CapsuleSimulation, law: AbstractEntryGuidance, key: PRNGKeyArr
         rec = _trace(y0, c, nav, command, g, sim.earth) if record else None
         return _Carry(flight=flight, guidance=g), rec
 
+    def cycle(c: _Carry, n=sim.pc_every):
+        return jax.lax.scan(control_step, c, jnp.arange(n))
+
     z = jnp.zeros(())
+    y0_xyz = to_xyz(y0)
     flight = _Flight(
-        y=y0,
+        y=y0_xyz,
+        density=atmosphere.density(flight_variables(y0, sim.earth).altitude_m),
         t=z,
         act=sim.actuator.init(sim.hold_bank_rad),
         done=jnp.asarray(False),
-        chute=y0,
-        t_chute=z,
+        cross_y=y0_xyz,
+        cross_t=z,
+        cross_bank=z,
         heat_load=z,
         heat_peak=z,
         load_peak=z,
     )
-    c0 = _Carry(flight=flight, guidance=law.init(measure(y0), ctx))
-    c, rec = jax.lax.scan(control_step, c0, None, length=sim.n_control)
-    return _outcome(sim, c, draws), rec
+    c = _Carry(flight=flight, guidance=law.init(measure(y0), ctx))
+    n_cycles, rest = divmod(sim.n_control, sim.pc_every)
+    if record:
+        c, rec = jax.lax.scan(lambda c, _: cycle(c), c, None, length=n_cycles)
+        rec = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[2:]), rec)
+    else:
+        c, _ = jax.lax.while_loop(
+            lambda ck: (ck[1] < n_cycles) & ~ck[0].flight.done,
+            lambda ck: (cycle(ck[0])[0], ck[1] + 1),
+            (c, jnp.asarray(0, jnp.int32)),
+        )
+        rec = None
+    if rest:  # the control steps of a last, partial cycle (a finished flight is frozen)
+        c, tail = cycle(c, rest)
+        if record:
+            rec = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), rec, tail)
+    chute, t_chute = _chute_point(sim, truth, c.flight, y0)
+    return _outcome(sim, c, chute, t_chute, draws), rec
 
 
-def _outcome(sim: CapsuleSimulation, c: _Carry, draws) -> CapsuleOutcome:
+def _outcome(
+    sim: CapsuleSimulation, c: _Carry, chute: EntryState, t_chute, draws
+) -> CapsuleOutcome:
     """Chute-point errors against the nominal entry -> target track, loads, the law's log.
 
     Status, by precedence: ``skip_out`` (climbed above the law's skip-out altitude),
@@ -443,7 +512,7 @@ def _outcome(sim: CapsuleSimulation, c: _Carry, draws) -> CapsuleOutcome:
     earth, f, g = sim.earth, c.flight, c.guidance
     log = g.log
     nominal_start = unit(entry_state_from_conditions(sim.entry, earth).r)
-    u_chute = unit(to_earth_fixed(f.chute.r, f.t_chute, earth.rotation_rate))
+    u_chute = unit(to_earth_fixed(chute.r, t_chute, earth.rotation_rate))
     along, cross = along_cross_track(u_chute, nominal_start, sim.target_fixed)
     r_e_km = earth.equatorial_radius_m / 1e3
     outcome = CapsuleOutcome(
@@ -468,7 +537,7 @@ def _outcome(sim: CapsuleSimulation, c: _Carry, draws) -> CapsuleOutcome:
         t_guidance_s=log.t_guidance_s,
         t_kepler_s=log.t_kepler_s,
         t_switch_s=log.t_switch_s,
-        t_chute_s=f.t_chute,
+        t_chute_s=t_chute,
         dispersion=draws,
     )
     return with_status(

@@ -56,6 +56,11 @@ class AbstractSystem(abc.ABC):
         test_overrides: ``{"section.field": value}`` that make ``example`` cheap for tests.
         step_seconds: measured wall seconds of one step (:meth:`steps_per_run`) on one core,
             for the cost estimate.
+        chunk_per_device: runs per host device in one compiled call of a study, measured
+            where the per-run time is lowest (a batch whose working set outgrows the core's
+            cache, or whose lock-step loops wait longer for the slowest run, is slower per
+            run; too small a batch pays the per-operation overhead); ``None``: 1024 runs per
+            call.
         batch_tolerance: ``(rtol, atol)`` to which a vmapped batch reproduces the per-run
             program on float outcomes (integer outcomes must be equal): both compute the same
             run, but XLA compiles the two programs separately and may round differently.
@@ -74,6 +79,7 @@ class AbstractSystem(abc.ABC):
     batch_tolerance: ClassVar[tuple[float, float]] = (1e-9, 1e-9)
     test_overrides: ClassVar[dict[str, Any]] = {}
     step_seconds: ClassVar[float] = 1e-6
+    chunk_per_device: ClassVar[int | None] = None
 
     # ---- cost ----
     def steps_per_run(self, config: dict) -> float | None:

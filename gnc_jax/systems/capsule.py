@@ -24,8 +24,10 @@ from .base import AbstractSystem, register_system
 MEAN_SPEED_FRACTION = 0.58  # chute range / (flight time x entry speed): 8000 km in 1250 s at 11
 FIRST_ENTRY_FRACTION = 0.16  # corrector-active first entry over the flight: (229 - 34) / 1250 s
 HORIZON_FRACTION = 0.56  # mean time to the switch point from a corrector cycle over the flight
-PREDICTIONS_PER_CYCLE = 4.3  # mean predictions per corrector cycle (209 over 49 cycles)
-STEP_SECONDS = 2.7e-6  # s per step and device: paper scenario, 256 runs in 8.3 s on 2 devices
+COAST_FRACTION = 0.6  # of that horizon flown in the predictor's coast steps (load < 0.02 g)
+PREDICTIONS_PER_CYCLE = 2.7  # mean predictions per corrector cycle (131 over 49 cycles)
+STEP_SECONDS = 1.5e-6  # s per step and device (benchmarks/capsule_cost.py): 0.6e-6 on the paper
+# scenario (256 runs in 0.69 s on 2 devices), 2.8e-6 and 3.4e-6 at 5000 and 2500 km
 
 
 def _interval(x: np.ndarray) -> dict[str, Any]:
@@ -242,6 +244,10 @@ class CapsuleSystem(AbstractSystem):
 
     # measured with benchmarks/capsule_cost.py (wall s x devices / runs / steps)
     step_seconds = STEP_SECONDS
+    # measured with benchmarks/capsule.py (per-run time against the chunk size): the lowest
+    # per-run time is at 256 runs per device, whose working set (about 2 kB per run of
+    # live buffers, the compiled chunk's temp memory) half fills a 1 MB L2 cache
+    chunk_per_device = 256
 
     def check(self, config):
         capsule_scenario.check(config)
@@ -250,25 +256,26 @@ class CapsuleSystem(AbstractSystem):
         """Truth RK4 steps plus the predictor's RK4 steps (one truth-step equivalent each:
         both are an RK4 step of an entry vector field), estimated from the scenario alone.
 
-        The truth scan always runs ``max_time_s / dt_s`` steps (a finished flight is masked,
-        not stopped). Each corrector cycle of the first entry makes about
+        The truth loop runs until the flight is down (about ``range / (MEAN_SPEED_FRACTION
+        * entry speed)``, at most ``max_time_s``) in steps of ``dt_s``. Each corrector cycle
+        of the first entry (about ``FIRST_ENTRY_FRACTION`` of the flight) makes about
         ``PREDICTIONS_PER_CYCLE`` predictions (at most ``1 + n_bracket + n_iter``), each
-        integrating from now to the switch point at ``predictor_dt_s``. The flight lasts about
-        ``range / (MEAN_SPEED_FRACTION * entry speed)``; the first entry (the corrector's
-        cycles) about ``FIRST_ENTRY_FRACTION`` of it; a prediction reaches about
-        ``HORIZON_FRACTION`` of it ahead. The fractions are those of the paper scenario
-        (256 runs: flight 1250 s, guidance 34-229 s, switch at 827 s, 4.3 predictions per
-        cycle); the estimate is within about x3 on the off-nominal cases of
+        integrating about ``HORIZON_FRACTION`` of the flight ahead, ``COAST_FRACTION`` of it
+        in steps of ``predictor_coast_dt_s`` and the rest in steps of ``predictor_dt_s``. The
+        fractions are those of the paper scenario (256 runs: flight 1250 s, guidance
+        34-229 s, switch at 827 s, 2.7 predictions per cycle, 48 steps per prediction); the
+        estimate is within about x3 on the off-nominal cases of
         ``benchmarks/capsule_cost.py``.
         """
         e, s, g = config["entry"], config["simulation"], config["guidance"]
         law = g.get(g.get("law", self.default_law), {})
-        truth = math.ceil(s["max_time_s"] / s["control_dt_s"]) * round(
-            s["control_dt_s"] / s["dt_s"]
-        )
         flight_s = min(s["max_time_s"], e["range_km"] / (MEAN_SPEED_FRACTION * e["speed_kmps"]))
+        truth = math.ceil(flight_s / s["dt_s"])
         dt = law.get("predictor_dt_s", 8.0)
-        horizon = min(HORIZON_FRACTION * flight_s / dt, law.get("predictor_max_steps", 1000))
+        dt_coast = law.get("predictor_coast_dt_s", 32.0)
+        horizon_s = HORIZON_FRACTION * flight_s
+        horizon = horizon_s * ((1.0 - COAST_FRACTION) / dt + COAST_FRACTION / dt_coast)
+        horizon = min(horizon, law.get("predictor_max_steps", 1000))
         slots = 1 + law.get("n_bracket", 6) + law.get("n_iter", 6)
         cycles = FIRST_ENTRY_FRACTION * flight_s / g["pc_period_s"]
         return float(truth + cycles * min(PREDICTIONS_PER_CYCLE, slots) * horizon)

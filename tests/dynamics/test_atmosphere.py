@@ -97,3 +97,26 @@ def test_atmosphere_module_selects_model_and_scales(model):
 def test_atmosphere_rejects_unknown_model():
     with pytest.raises(ValueError, match="unknown atmosphere model"):
         Atmosphere(model="msis")
+
+
+def test_us76_bucket_lookup_finds_the_interval_numpy_searchsorted_finds():
+    """The bucketed interval search (no binary search under vmap) against numpy's
+    searchsorted on the table nodes: at every node, one ulp either side, bucket edges and
+    random altitudes inside and outside 0-1000 km."""
+    from gnc_jax.dynamics import atmosphere as a
+
+    nodes = a._US76_ALT_M
+    edges = nodes[0] + a._US76_BUCKET_M * np.arange(-4, a._US76_BUCKETS.shape[0] + 4)
+    z = np.concatenate(
+        [
+            nodes,
+            np.nextafter(nodes, -np.inf),
+            np.nextafter(nodes, np.inf),
+            edges,
+            np.nextafter(edges, -np.inf),
+            np.random.default_rng(0).uniform(-5e3, 1.1e6, 100_000),
+            [-1e30, 1e30, np.inf, -np.inf],
+        ]
+    )
+    expected = np.clip(np.searchsorted(nodes, z, side="right") - 1, 0, len(nodes) - 2)
+    np.testing.assert_array_equal(np.asarray(jax.jit(a._us76_interval)(z)), expected)

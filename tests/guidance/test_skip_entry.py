@@ -111,3 +111,60 @@ def test_guidance_stops_below_the_chute_altitude(law_and_ctx):
     assert int(new.phase) == 0  # a load far above ng0 does not start guidance
     assert int(new.log.pc_cycles) == 0 and int(new.log.reversals) == 0
     assert not bool(new.log.skipped_out)
+
+
+def test_reference_lookup_interpolates_as_jnp_interp(law_and_ctx):
+    """The reference tables are looked up by arithmetic on their uniform speed grid; the
+    reference is numpy-style linear interpolation (jnp.interp), clamped at both ends."""
+    _, law, _ = law_and_ctx
+    ref = law.reference
+    v = np.asarray(ref.velocity_mps)
+    np.testing.assert_allclose(np.diff(v), np.diff(v)[0], rtol=1e-9)  # uniform grid
+    speeds = np.concatenate(
+        [np.random.default_rng(1).uniform(v[-1] - 500.0, v[0] + 500.0, 500), v, [v[0], v[-1]]]
+    )
+    got = jax.vmap(ref.lookup)(jnp.asarray(speeds))
+    tables = (ref.bank_rad, ref.range_to_go_m, ref.hdot_mps, ref.drag_load_g, ref.range_rate_mps)
+    for value, table in zip(got, tables):
+        expected = np.interp(speeds, v[::-1], np.asarray(table)[::-1])
+        scale = np.max(np.abs(np.asarray(table)))
+        np.testing.assert_allclose(value, expected, rtol=1e-12, atol=1e-12 * scale)
+
+
+def test_predictor_coast_step_costs_less_accuracy_than_the_corrector_tolerance(law_and_ctx):
+    """The predictor's coast steps (32 s below 0.02 g: the Kepler arc) against 8 s steps
+    throughout, at the states and the solutions of the corrector cycles of a flight: the
+    predicted range errors differ by less than the corrector's tolerance, with about half
+    the integration steps."""
+    import dataclasses
+
+    from gnc_jax.dynamics.entry import EntryState
+    from gnc_jax.guidance.entry_common import EntryModel
+
+    sim, law, ctx = law_and_ctx
+    assert law.predictor_coast_dt_s > law.predictor_dt_s
+    fine = dataclasses.replace(law, predictor_coast_dt_s=law.predictor_dt_s)
+    _, tr = gj.simulate_one(gj.load_scenario("lunar-skip-entry"), index=0, seed=0)
+    cycles = np.flatnonzero(tr.corrector_evals > 0)[::6]
+    assert len(cycles) >= 6
+
+    @jax.jit
+    @jax.vmap
+    def predict(i):
+        def one(l):
+            c = ctx.model
+            dr, lr = jnp.asarray(tr.drag_ratio)[i], jnp.asarray(tr.lift_ratio)[i]
+            m = EntryModel(c.vehicle, c.earth, c.atmosphere, dr, lr)
+            y = EntryState(jnp.asarray(tr.r_m)[i], jnp.asarray(tr.v_mps)[i])
+            s0 = jnp.asarray(tr.sigma_0_rad)[i]
+            t, up = jnp.asarray(tr.t_s)[i], jnp.asarray(tr.pulled_up)[i]
+            p = l.predict(y, t, up, s0, m, ctx.target_fixed)
+            return p.miss_m, p.kind, p.steps
+
+        return one(law), one(fine)
+
+    coarse, reference = predict(jnp.asarray(cycles))
+    np.testing.assert_array_equal(coarse[1], 0)  # every prediction ends at the switch point
+    np.testing.assert_array_equal(reference[1], 0)
+    assert float(jnp.max(jnp.abs(coarse[0] - reference[0]))) < float(law.range_tolerance_m)
+    assert int(jnp.sum(coarse[2])) < 0.6 * int(jnp.sum(reference[2]))

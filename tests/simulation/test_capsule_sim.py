@@ -80,6 +80,25 @@ def test_vmapped_capsule_batch_equals_per_run_loop(capsule_scenario):
     assert abs(s["switch_altitude_km_mean"] / 78.66 - 1.0) < 0.1
 
 
+def test_flight_stopped_when_down_equals_the_full_length_scan(capsule_scenario):
+    """Without a trace the guidance cycles stop once the flight is down (a while_loop); with
+    one they run the whole max_time_s (a scan). A finished flight is frozen, so both give the
+    same outcome, the scan being an independent loop structure."""
+    from gnc_jax.simulation.capsule import simulate
+
+    sim, law = gj.build(capsule_scenario)
+    for i in range(2):
+        key = gj.run_key(5, i)
+        short, _ = jax.jit(lambda k: simulate(sim, law, k, record=False))(key)
+        full, trace = jax.jit(lambda k: simulate(sim, law, k, record=True))(key)
+        assert trace.t_s.shape == (sim.n_control,)
+        assert float(short.t_chute_s) < 0.7 * sim.n_control * sim.control_dt
+        for name in short._fields:
+            np.testing.assert_allclose(
+                getattr(short, name), getattr(full, name), rtol=1e-12, atol=1e-9, err_msg=name
+            )
+
+
 def test_downrange_gradient_wrt_tracking_gains_matches_finite_differences(capsule_scenario):
     """Forward-mode derivative of the chute downrange error with respect to the four
     second-entry feedback gains vs central differences at two steps.
