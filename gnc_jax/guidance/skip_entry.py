@@ -425,11 +425,13 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         "8 s steps, twice the cost per step; see benchmarks/entry_integrators.py)",
     )
     corrector_start: str = param(
-        "secant",
-        choices=("secant", "bracket"),
-        doc="corrector start: 'secant' (warm start on the last solution's planned profile, then "
-        "a secant step on the last cycle's slope) or 'bracket' (the last solution, then the Δσ "
-        "step of eq. 15, as the seed)",
+        "bracket",
+        choices=("bracket", "secant"),
+        doc="corrector start: 'bracket' (the last solution, then the Δσ step of eq. 15, as the "
+        "seed) or 'secant' (warm start on the last solution's planned profile, then a secant "
+        "step on the last cycle's slope: 40 % fewer predictions, but where the range error has "
+        "two roots it can settle on the lofting one; at a -5.6 deg entry 18 of 256 runs skip "
+        "out against 5 with 'bracket')",
     )
     n_bracket: int = param(6, lo=1, hi=100, doc="bracketing steps of the corrector")
     n_iter: int = param(6, lo=1, hi=100, doc="regula-falsi iterations of the corrector")
