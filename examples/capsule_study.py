@@ -19,7 +19,7 @@ print(
     f"{s['crossrange_err_km_3sigma']} km; failed {s['failed']}; "
     f"{s['wall_s']:.1f} s for {study.runs} runs after {s['compile_s']:.1f} s compile"
 )
-study.save("results/example-skip-entry")
+study.save("results/example-skip-entry", overwrite=True)
 print(gj.report("results/example-skip-entry"))
 
 # 2. Sweep the range gain of the second-entry tracking law (same draws for every value; a new

@@ -17,7 +17,7 @@ print(
     f"LOS law: miss RMS {summary['miss_rms_m']:.1f} m, Δv mean {summary['dv_mean_mps']:.2f} m/s "
     f"({summary['wall_s']:.2f} s for {study.runs} runs after {summary['compile_s']:.1f} s compile)"
 )
-study.save("results/example-los")
+study.save("results/example-los", overwrite=True)
 print(gj.report("results/example-los"))
 
 # 2. A sweep of the miss tolerance k1 with --set-style overrides (same draws for every k1).

@@ -25,7 +25,7 @@ for name in ("phoenix-midcourse", "phoenix-midcourse-cd", "phoenix-midcourse-stm
         f"Δv mean {s['dv_mean_mps']:.3f} m/s ({s['wall_s']:.2f} s after compilation)"
     )
 study = gj.run_study(gj.load_scenario("phoenix-midcourse"), runs=100, seed=0)
-study.save("results/example-midcourse")
+study.save("results/example-midcourse", overwrite=True)
 print(gj.report("results/example-midcourse"))
 
 # 2. The 7-day cycle from a 500 km + 1 m/s injection error, for a sweep of execution errors

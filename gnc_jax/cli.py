@@ -124,21 +124,54 @@ def _writable_dir(path) -> None:
         ) from None
 
 
+def _connect(address: str):
+    """A Dask client of the scheduler at ``address``, or one line saying why not."""
+    from .scenario import ScenarioError
+
+    try:
+        from dask.distributed import Client
+    except ImportError:
+        raise ScenarioError(
+            "--scheduler: needs dask.distributed; allowed: pip install 'gnc_jax[cluster]'"
+        ) from None
+    try:
+        return Client(address, timeout=10)
+    except (OSError, TimeoutError, ValueError) as e:
+        raise ScenarioError(
+            f"--scheduler {address}: cannot connect ({type(e).__name__}: {e}); allowed: the "
+            "address of a running Dask scheduler, e.g. tcp://host:8786"
+        ) from None
+
+
 def cmd_run(args) -> int:
     from .montecarlo import run_study
-    from .scenario import load_scenario
+    from .scenario import ScenarioError, load_scenario
 
     scenario = load_scenario(args.scenario, overrides=args.set or ())
     if args.out:
         _writable_dir(args.out)
-    study = run_study(
-        scenario,
-        runs=args.runs,
-        seed=args.seed,
-        chunk_size=args.chunk_size,
-        progress=False if args.no_progress else None,
-        max_hours=args.max_hours,
-    )
+    elif args.resume or args.overwrite:
+        raise ScenarioError("--resume/--overwrite: no --out DIR; allowed: with --out DIR")
+    client = None
+    if args.scheduler:
+        client = _connect(args.scheduler)
+    try:
+        study = run_study(
+            scenario,
+            runs=args.runs,
+            seed=args.seed,
+            chunk_size=args.chunk_size,
+            progress=False if args.no_progress else None,
+            max_hours=args.max_hours,
+            out=args.out,
+            resume=args.resume,
+            overwrite=args.overwrite,
+            client=client,
+            workers=args.workers,
+        )
+    finally:
+        if client is not None:
+            client.close()
     summary = study.summary()
     print(
         f"{scenario.name}: {study.runs} runs, compile {study.compile_s:.1f} s, "
@@ -148,8 +181,7 @@ def cmd_run(args) -> int:
     if args.set:
         print("  (modified by --set: the paper's numbers are for the packaged scenario)")
     if args.out:
-        paths = study.save(args.out)
-        print("wrote " + ", ".join(paths.values()))
+        print(f"wrote {args.out}/summary.json, {args.out}/runs/ ({study.runs} runs), scenario.toml")
     if _too_many_failed(summary, args.max_failed):
         print(
             f"gnc-jax: {summary['failed']} of {summary['runs']} runs failed "
@@ -232,7 +264,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="number of runs (default: the paper's)",
     )
     q.add_argument("--seed", type=_seed, default=None, help="root seed (default: scenario's)")
-    q.add_argument("--out", default=None, help="directory for summary.json, runs.parquet, TOML")
+    q.add_argument(
+        "--out",
+        default=None,
+        help="study directory: runs/ (Parquet chunks, written as they finish), summary.json, "
+        "scenario.toml",
+    )
     q.add_argument(
         "--set",
         action="append",
@@ -246,6 +283,27 @@ def build_parser() -> argparse.ArgumentParser:
         help="runs per compiled call (results do not depend on it)",
     )
     q.add_argument("--no-progress", action="store_true", help="no progress bar")
+    q.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the study in --out (finished chunks are kept)",
+    )
+    q.add_argument(
+        "--overwrite", action="store_true", help="replace a study already in --out as a whole"
+    )
+    where = q.add_mutually_exclusive_group()
+    where.add_argument(
+        "--workers",
+        type=_positive_int("--workers"),
+        default=None,
+        help="run the chunks on a local Dask cluster of N worker processes",
+    )
+    where.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="tcp://HOST:PORT",
+        help="run the chunks on an existing Dask cluster",
+    )
     _study_limits(q)
     q.set_defaults(func=cmd_run)
 
@@ -273,6 +331,7 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     import gnc_jax  # noqa: F401  (float64 and host devices before JAX starts)
 
+    from .montecarlo import StudyError
     from .results import ResultsError
     from .scenario import ScenarioError
 
@@ -281,6 +340,9 @@ def main(argv=None) -> int:
     except (ScenarioError, ResultsError) as e:
         print(f"gnc-jax: error: {e}", file=sys.stderr)
         return EXIT_REFUSED
+    except StudyError as e:
+        print(f"gnc-jax: error: {e}", file=sys.stderr)
+        return EXIT_FAILED_RUNS
     except KeyboardInterrupt:
         print("gnc-jax: interrupted", file=sys.stderr)
         return 130

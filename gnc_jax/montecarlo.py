@@ -9,6 +9,7 @@ Compilation happens once, ahead of time, and is timed separately from the study.
 
 import dataclasses
 import functools
+import hashlib
 import os
 import sys
 import time
@@ -23,6 +24,7 @@ from tqdm.auto import tqdm
 from ._status import Status
 from .results import save_study, summarize
 from .scenario import Scenario, ScenarioError
+from .store import chunk_files
 from .systems.base import AbstractSystem, get_system
 
 
@@ -171,23 +173,49 @@ class Study:
     """Result of a Monte Carlo study.
 
     Attributes:
-        outcomes: per-run arrays keyed by outcome field (first axis = run index).
+        outcomes: per-run arrays keyed by outcome field (first axis = run index); for a study
+            written to a directory (``run_study(..., out=DIR)``) they are read from its chunk
+            files when first used, and :meth:`summary` reads only the columns it needs.
         compile_s: ahead-of-time compilation time (0 when an executable compiled earlier in
             this process was reused); wall_s: the study's wall time after compilation.
+        path: the study directory, if written to one; chunk_errors: chunks that raised
+            (``{"chunk", "runs": [start, stop], "error"}``), their runs missing from the study.
     """
 
     scenario: Scenario
     runs: int
     seed: int
-    outcomes: dict[str, np.ndarray]
+    _outcomes: dict[str, np.ndarray] | None = dataclasses.field(repr=False)
     compile_s: float
     wall_s: float
     n_devices: int
     chunk_size: int
+    path: Any = None
+    chunk_errors: tuple = ()
+    workers: int | None = None
+
+    def __post_init__(self):
+        if self._outcomes is None and self.path is None:
+            raise ValueError("a Study needs its outcomes or the directory holding them")
+
+    @property
+    def outcomes(self) -> dict[str, np.ndarray]:
+        return self.columns()
+
+    def columns(self, names=None) -> dict[str, np.ndarray]:
+        """The outcome arrays ``names`` (all by default), from memory or the chunk files."""
+        if self._outcomes is not None:
+            return self._outcomes if names is None else {k: self._outcomes[k] for k in names}
+        from .store import read_outcomes
+
+        if names is None:
+            self._outcomes = read_outcomes(self.path)
+            return self._outcomes
+        return read_outcomes(self.path, names)
 
     @property
     def status(self) -> np.ndarray:
-        return self.outcomes["status"]
+        return self.columns(["status"])["status"]
 
     @property
     def ok(self) -> np.ndarray:
@@ -196,8 +224,10 @@ class Study:
     def summary(self) -> dict[str, Any]:
         return summarize(self)
 
-    def save(self, out_dir) -> dict[str, str]:
-        return save_study(self, out_dir)
+    def save(self, out_dir, overwrite: bool = False) -> dict[str, str]:
+        """Write the study into ``out_dir`` (the layout of ``gnc_jax.store``); a directory
+        that holds another study is refused unless ``overwrite``."""
+        return save_study(self, out_dir, overwrite=overwrite)
 
 
 def _nan_to_status(outcomes: dict[str, np.ndarray]) -> None:
@@ -220,6 +250,11 @@ def run_study(
     n_devices: int | None = None,
     max_hours: float = MAX_HOURS,
     max_memory_fraction: float = MAX_MEMORY_FRACTION,
+    out=None,
+    resume: bool = False,
+    overwrite: bool = False,
+    client=None,
+    workers: int | None = None,
 ) -> Study:
     """Run a Monte Carlo study of ``scenario``.
 
@@ -228,7 +263,7 @@ def run_study(
         runs: number of runs (default: the scenario's paper run count).
         seed: root seed (default: the scenario's).
         chunk_size: runs per compiled call (default: equal chunks of at most the system's
-            ``chunk_per_device`` runs per device, or 1024 runs).
+            ``chunk_per_device`` runs per device, or 1024 runs; a resumed study keeps its own).
         progress: show a progress bar (default: when stderr is a terminal and there are
             several chunks).
         n_devices: host devices to shard over (default: all).
@@ -237,9 +272,21 @@ def run_study(
         max_memory_fraction: refuse a chunk whose compiled program needs more than this
             fraction of the machine's physical memory (checked after compilation, before any
             run).
+        out: a study directory (``gnc_jax.store``): each chunk is written there as soon as it
+            finishes, the summary and scenario last; the returned study reads its outcomes
+            from there. A directory holding another study is refused.
+        resume: continue the study already in ``out`` (same scenario, seed, runs, chunk size
+            and code version): finished chunks are kept, missing or damaged ones computed.
+        overwrite: replace a study already in ``out`` as a whole.
+        client: a ``dask.distributed.Client``: the chunks run as tasks on its workers (each
+            worker compiles once per process; results come back to this process).
+        workers: start a local Dask cluster of this many worker processes for the study
+            (the cores are split between them).
 
     A study estimated to take more than ``ANNOUNCE_S`` seconds prints its estimate to stderr
-    and runs in chunks of about 10 s each so that the progress bar has an ETA.
+    and runs in chunks of about 10 s each so that the progress bar has an ETA. Per-run
+    outcomes do not depend on the chunk size, the devices, the workers or on resuming.
+    Ctrl-C stops between chunks; the chunks already written to ``out`` are kept.
     """
     runs = scenario.runs if runs is None else runs
     seed = scenario.seed if seed is None else seed
@@ -251,6 +298,16 @@ def run_study(
         isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size <= 0
     ):
         raise ScenarioError(f"chunk_size: {chunk_size!r}; allowed: an integer >= 1")
+    if workers is not None and (
+        isinstance(workers, bool) or not isinstance(workers, int) or workers <= 0
+    ):
+        raise ScenarioError(f"workers: {workers!r}; allowed: an integer >= 1")
+    if client is not None and workers is not None:
+        raise ScenarioError("workers: given with a client; allowed: one of client or workers")
+    if (resume or overwrite) and out is None:
+        raise ScenarioError("resume/overwrite: no study directory; allowed: with out=DIR")
+    if resume and overwrite:
+        raise ScenarioError("resume and overwrite: both given; allowed: one of them")
     for name, value, hi in (
         ("max_hours", max_hours, None),
         ("max_memory_fraction", max_memory_fraction, 1.0),
@@ -270,53 +327,252 @@ def run_study(
             f"cost: {cost}; allowed: at most {max_hours:g} h (raise max_hours, CLI --max-hours, "
             "or use fewer runs or a coarser step)"
         )
+    if resume and chunk_size is None:
+        chunk_size = _recorded_chunk_size(out)
     announce = cost.seconds is not None and cost.seconds > ANNOUNCE_S and progress is not False
     if announce:
         print(f"{scenario.name}: estimated {cost}", file=sys.stderr)
-    sim, law = build(scenario)
-    fn, n_dev = batch_function(system, n_devices)
+    distributed = client is not None or workers is not None
+    n_dev = min(n_devices or len(jax.devices()), len(jax.devices()))
     default_chunk = system.chunk_per_device * n_dev if system.chunk_per_device else 1024
     if chunk_size is None and announce:  # chunks of about 10 s: a progress bar with an ETA
         default_chunk = int(max(1, min(default_chunk, 10.0 * runs / cost.seconds)))
     chunk = min(runs, chunk_size or default_chunk)
     if chunk_size is None:  # equal chunks: the last one is not mostly padding
         chunk = -(-runs // -(-runs // chunk))
-    chunk = -(-chunk // n_dev) * n_dev  # whole number of runs per device
+    if not distributed:
+        chunk = -(-chunk // n_dev) * n_dev  # whole number of runs per device
     n_chunks = -(-runs // chunk)
+    bounds = [(c * chunk, min((c + 1) * chunk, runs)) for c in range(n_chunks)]
 
+    store = None
+    if out is not None:
+        from .store import StudyStore, code_version
+
+        manifest = dict(
+            scenario_name=scenario.name,
+            kind=scenario.kind,
+            scenario_sha256=hashlib.sha256(scenario.to_toml().encode()).hexdigest(),
+            seed=seed,
+            runs=runs,
+            chunk_size=chunk,
+            code_version=code_version(),
+        )
+        store = StudyStore(out, manifest, resume=resume, overwrite=overwrite)
+    try:
+        todo = [c for c in range(n_chunks) if store is None or not store.valid_chunk(c, *bounds[c])]
+        show = (
+            progress
+            if progress is not None
+            else (n_chunks > 1 and (sys.stderr.isatty() or announce))
+        )
+        bar = tqdm(
+            total=runs,
+            initial=sum(bounds[c][1] - bounds[c][0] for c in range(n_chunks) if c not in todo),
+            desc=scenario.name,
+            unit="run",
+            disable=not show,
+        )
+        parts: dict[int, dict] = {}
+
+        def finished(c, outcomes):
+            start, stop = bounds[c]
+            outcomes = {k: np.asarray(v)[: stop - start] for k, v in outcomes.items()}
+            _nan_to_status(outcomes)
+            if store is not None:
+                store.write_chunk(c, start, outcomes)
+            else:
+                parts[c] = outcomes
+            bar.update(stop - start)
+
+        t0 = time.perf_counter()
+        try:
+            if distributed:
+                compile_s, errors, n_workers = _run_distributed(
+                    scenario, seed, todo, bounds, chunk, client, workers, finished
+                )
+                t0 += compile_s  # the workers compile first, all at once
+            else:
+                compile_s, t0 = _run_local(
+                    scenario, system, seed, todo, chunk, n_devices, max_memory_fraction, finished
+                )
+                errors, n_workers = [], None
+        except KeyboardInterrupt:
+            if store is not None:
+                kept = len(chunk_files(store.path))
+                print(
+                    f"{scenario.name}: interrupted; {kept} of {n_chunks} chunks kept in "
+                    f"{store.runs_dir} (the same command with --resume continues)",
+                    file=sys.stderr,
+                )
+            raise
+        finally:
+            bar.close()
+        wall_s = time.perf_counter() - t0
+        if errors:
+            where = f"; the other chunks are in {store.runs_dir}, --resume retries" if store else ""
+            raise StudyError(
+                f"{scenario.name}: {len(errors)} of {n_chunks} chunks raised: "
+                + "; ".join(
+                    f"chunk {e['chunk']} (runs {e['runs'][0]}..{e['runs'][1] - 1}): {e['error']}"
+                    for e in errors[:3]
+                )
+                + where,
+                errors,
+            )
+        if store is None:
+            fields = list(parts[0])
+            outcomes = {k: np.concatenate([parts[c][k] for c in range(n_chunks)]) for k in fields}
+            return Study(
+                scenario, runs, seed, outcomes, compile_s, wall_s, n_dev, chunk, workers=n_workers
+            )
+        study = Study(
+            scenario,
+            runs,
+            seed,
+            None,
+            compile_s,
+            wall_s,
+            n_dev,
+            chunk,
+            store.path,
+            workers=n_workers,
+        )
+        store.finish(study.summary(), scenario.to_toml())
+        return study
+    finally:
+        if store is not None:
+            store.close()
+
+
+class StudyError(RuntimeError):
+    """Chunks of a study raised; ``errors``: ``{"chunk", "runs": [start, stop], "error"}``."""
+
+    def __init__(self, message: str, errors: list):
+        super().__init__(message)
+        self.errors = errors
+
+
+def _recorded_chunk_size(out) -> int | None:
+    import json
+    import pathlib
+
+    from .store import MANIFEST
+
+    try:
+        return int(json.loads((pathlib.Path(out) / MANIFEST).read_text())["chunk_size"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def _run_local(scenario, system, seed, todo, chunk, n_devices, max_memory_fraction, finished):
+    """The chunks ``todo`` on this process's devices; returns the compile time and the
+    ``time.perf_counter()`` at which the runs started."""
+    sim, law = build(scenario)
+    fn, n_dev = batch_function(system, n_devices)
     seed_arr = jnp.asarray(seed, dtype=jnp.uint32)
     compiled, compile_s = _compile(system, fn, n_dev, sim, law, seed_arr, chunk)
     _check_memory(compiled, chunk, max_memory_fraction)
-
-    show = (
-        progress if progress is not None else (n_chunks > 1 and (sys.stderr.isatty() or announce))
-    )
-    bar = None
-    if show:
-        bar = tqdm(total=runs, desc=scenario.name, unit="run", disable=not show)
-    parts = []
-    t0 = time.perf_counter()
 
     def launch(c):
         return compiled(sim, law, seed_arr, jnp.arange(c * chunk, (c + 1) * chunk))
 
     # One chunk ahead: a device that finishes its share of a chunk starts on the next while
     # the other devices and the host are still on this one.
-    pending = launch(0)
-    for c in range(n_chunks):
+    t0 = time.perf_counter()
+    if todo:
+        pending = launch(todo[0])
+    for k, c in enumerate(todo):
         out = pending
-        if c + 1 < n_chunks:
-            pending = launch(c + 1)
-        parts.append(jax.tree_util.tree_map(np.asarray, out))
-        if bar is not None:
-            bar.update(min(chunk, runs - c * chunk))
-    wall_s = time.perf_counter() - t0
-    if bar is not None:
-        bar.close()
-    fields = parts[0]._fields
-    outcomes = {name: np.concatenate([getattr(p, name) for p in parts])[:runs] for name in fields}
-    _nan_to_status(outcomes)
-    return Study(scenario, runs, seed, outcomes, compile_s, wall_s, n_dev, chunk)
+        if k + 1 < len(todo):
+            pending = launch(todo[k + 1])
+        finished(c, out._asdict())
+    return compile_s, t0
+
+
+_BUILT: dict = {}
+
+
+def run_chunk(scenario: Scenario, seed: int, start: int, stop: int, chunk: int):
+    """Runs ``start .. stop-1`` of a study on this process's devices (a Dask worker's task):
+    ``(outcomes as numpy arrays, compile time)``. The scenario is built and the chunk compiled
+    once per process and chunk size (and read from JAX's persistent compilation cache when
+    the worker was started with one)."""
+    system = get_system(scenario.kind)
+    text = scenario.to_toml()
+    if text not in _BUILT:
+        _BUILT.clear()
+        _BUILT[text] = build(scenario)
+    sim, law = _BUILT[text]
+    fn, n_dev = batch_function(system)
+    padded = -(-chunk // n_dev) * n_dev
+    seed_arr = jnp.asarray(seed, dtype=jnp.uint32)
+    compiled, compile_s = _compile(system, fn, n_dev, sim, law, seed_arr, padded)
+    out = compiled(sim, law, seed_arr, jnp.arange(start, start + padded))
+    return {k: np.asarray(v)[: stop - start] for k, v in out._asdict().items()}, compile_s
+
+
+def local_cluster(workers: int):
+    """A ``dask.distributed`` client of a local cluster of ``workers`` processes, the cores
+    split between them (``GNC_JAX_HOST_DEVICES``), with JAX's persistent compilation cache."""
+    try:
+        from dask.distributed import Client, LocalCluster
+    except ImportError:
+        raise ScenarioError(
+            "workers: needs dask.distributed; allowed: pip install 'gnc_jax[cluster]'"
+        ) from None
+    import pathlib
+
+    per = max(1, (os.cpu_count() or 1) // workers)
+    cache = os.environ.get(
+        "JAX_COMPILATION_CACHE_DIR", str(pathlib.Path.home() / ".cache" / "gnc_jax" / "xla")
+    )
+    cluster = LocalCluster(
+        n_workers=workers,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=None,
+        env={"GNC_JAX_HOST_DEVICES": str(per), "JAX_COMPILATION_CACHE_DIR": cache},
+    )
+    return Client(cluster)
+
+
+def _run_distributed(scenario, seed, todo, bounds, chunk, client, workers, finished):
+    """The chunks ``todo`` as tasks of a Dask client; returns ``(compile time, errors,
+    workers)``. A lost worker's tasks are rerun elsewhere by Dask; a chunk that raises is
+    reported and the others go on."""
+    from dask.distributed import as_completed
+
+    own = client is None
+    if own:
+        client = local_cluster(workers)
+    try:
+        n_workers = len(client.scheduler_info()["workers"])
+        futures = {
+            client.submit(run_chunk, scenario, seed, *bounds[c], chunk, pure=False): c for c in todo
+        }
+        compile_s, errors = 0.0, []
+        for fut in as_completed(futures):
+            c = futures[fut]
+            if fut.status == "error":
+                exc = fut.exception()
+                errors.append(
+                    dict(chunk=c, runs=list(bounds[c]), error=f"{type(exc).__name__}: {exc}")
+                )
+                continue
+            outcomes, cs = fut.result()
+            compile_s = max(compile_s, cs)
+            finished(c, outcomes)
+        return compile_s, errors, n_workers
+    except BaseException:
+        for fut in list(locals().get("futures", ())):
+            fut.cancel()
+        raise
+    finally:
+        if own:
+            cluster = client.cluster
+            client.close()
+            cluster.close()
 
 
 @functools.lru_cache(maxsize=16)

@@ -37,7 +37,7 @@ def reproduce(
 ) -> list:
     """Run every packaged scenario at its paper run count (or ``runs``), save and compare.
 
-    Writes ``out_dir/<scenario>/`` (summary.json, runs.parquet, scenario.toml) and
+    Writes ``out_dir/<scenario>/`` (summary.json, runs/, scenario.toml) and
     ``out_dir/reproduce.md`` / ``reproduce.json``. Returns the summaries.
     """
     out = pathlib.Path(out_dir)
@@ -50,7 +50,7 @@ def reproduce(
         echo(f"== {scenario.name}: {n} runs ({scenario.reference})")
         limits = {} if max_hours is None else {"max_hours": max_hours}
         study = run_study(scenario, runs=n, progress=progress, **limits)
-        study.save(out / scenario.name)
+        study.save(out / scenario.name, overwrite=True)
         s = study.summary()
         summaries.append(s)
         echo(f"   compile {s['compile_s']:.1f} s, study {s['wall_s']:.2f} s, failed {s['failed']}")

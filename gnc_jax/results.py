@@ -1,7 +1,7 @@
-"""Study results: summary statistics, ``summary.json``, ``runs.parquet`` and the resolved TOML.
+"""Study results: summary statistics, ``summary.json``, the runs table and the resolved TOML.
 
 Only runs whose status is ``ok`` enter the statistics; the others are counted in ``failed``
-(with a count per status) and flagged in ``runs.parquet``.
+(with a count per status) and flagged in the runs table (``runs/``, see ``gnc_jax.store``).
 """
 
 import json
@@ -28,9 +28,42 @@ def _machine_note(study) -> str:
     )
 
 
+def _statistics_outcomes(study, system) -> dict:
+    """The outcomes the system's statistics read: everything for a study in memory; for one
+    on disk, only the columns that its statistics use (found on the first chunk), so that
+    the summary of a study of millions of runs reads a few columns, not the whole table."""
+    if study.path is None:
+        return study.outcomes
+    from .store import chunk_files, outcomes_from_table
+
+    table = pq.read_table(chunk_files(study.path)[0])
+    shapes = json.loads(table.schema.metadata[b"gnc_jax.shapes"])
+    sample = outcomes_from_table(table, shapes)
+
+    class Recording(dict):
+        def __getitem__(self, k):
+            used.add(k)
+            return dict.__getitem__(self, k)
+
+        def get(self, k, default=None):
+            used.add(k)
+            return dict.get(self, k, default)
+
+    used: set = set()
+    ok = sample["status"] == Status.ok
+    try:
+        if ok.any():
+            system.statistics(Recording(sample), ok)
+        else:
+            used = set(shapes)
+    except Exception:  # the probe is an optimisation: read everything instead
+        used = set(shapes)
+    return study.columns(sorted(used | {"status"}))
+
+
 def summarize(study) -> dict[str, Any]:
     """The ``summary.json`` content of a study."""
-    status = study.outcomes["status"]
+    status = study.status
     ok = status == Status.ok
     failed = {Status(int(s)).name: int(np.sum(status == s)) for s in np.unique(status) if s != 0}
     sc = study.scenario
@@ -51,8 +84,10 @@ def summarize(study) -> dict[str, Any]:
     system = get_system(sc.kind)
     if system.laws():
         out["law"] = sc.config["guidance"]["law"]
+    if study.workers:
+        out["dask_workers"] = study.workers
     if ok.any():
-        out.update(system.statistics(study.outcomes, ok))
+        out.update(system.statistics(_statistics_outcomes(study, system), ok))
     else:
         out["statistics"] = "none: no run is ok (see failed_by_status)"
     out["paper"] = dict(sc.paper)
@@ -61,34 +96,44 @@ def summarize(study) -> dict[str, Any]:
 
 def runs_table(study):
     """One row per run: index, status, outcomes and dispersion draws (vectors split in columns)."""
-    cols: dict[str, Any] = {"run": np.arange(study.runs)}
-    status = study.outcomes["status"]
-    cols["status"] = status
-    cols["status_name"] = [Status(int(s)).name for s in status]
-    for name, arr in study.outcomes.items():
-        if name == "status":
-            continue
-        if arr.ndim == 1:
-            cols[name] = arr
-        else:
-            flat = arr.reshape(arr.shape[0], -1)
-            for j in range(flat.shape[1]):
-                cols[f"{name}_{j}"] = flat[:, j]
-    return pa.table(cols)
+    from .store import chunk_table, read_runs
+
+    if study.path is not None:
+        return read_runs(study.path)
+    return chunk_table(study.outcomes, 0)
 
 
-def save_study(study, out_dir) -> dict[str, str]:
-    """Write ``summary.json``, ``runs.parquet`` and ``scenario.toml`` into ``out_dir``."""
+def save_study(study, out_dir, overwrite: bool = False) -> dict[str, str]:
+    """Write a study into ``out_dir`` in the layout of ``gnc_jax.store`` (``summary.json``,
+    ``runs/`` chunk files, ``scenario.toml``, ``study.json``). A directory holding another
+    study is refused unless ``overwrite``; a study already written there is left as it is."""
+    import hashlib
+
+    from .store import StudyStore, code_version
+
     out = pathlib.Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     paths = {
         "summary": out / "summary.json",
-        "runs": out / "runs.parquet",
+        "runs": out / "runs",
         "scenario": out / "scenario.toml",
     }
-    paths["summary"].write_text(json.dumps(study.summary(), indent=2) + "\n")
-    pq.write_table(runs_table(study), paths["runs"])
-    paths["scenario"].write_text(study.scenario.to_toml())
+    if study.path is not None and pathlib.Path(study.path).resolve() == out.resolve():
+        return {k: str(v) for k, v in paths.items()}
+    manifest = dict(
+        scenario_name=study.scenario.name,
+        kind=study.scenario.kind,
+        scenario_sha256=hashlib.sha256(study.scenario.to_toml().encode()).hexdigest(),
+        seed=study.seed,
+        runs=study.runs,
+        chunk_size=study.chunk_size,
+        code_version=code_version(),
+    )
+    outcomes = study.outcomes
+    with StudyStore(out, manifest, overwrite=overwrite) as store:
+        for c, start in enumerate(range(0, study.runs, study.chunk_size)):
+            stop = min(start + study.chunk_size, study.runs)
+            store.write_chunk(c, start, {k: v[start:stop] for k, v in outcomes.items()})
+        store.finish(study.summary(), study.scenario.to_toml())
     return {k: str(v) for k, v in paths.items()}
 
 
@@ -119,11 +164,22 @@ def _read_summary(path: pathlib.Path) -> dict:
 
 
 def _read_runs(path: pathlib.Path, n_runs: int) -> dict:
+    """The runs table of ``path``: a study's ``runs/`` directory of chunk files (or the single
+    ``runs.parquet`` of earlier versions); a damaged file is named."""
+    files = sorted(path.glob("chunk-*.parquet")) if path.is_dir() else [path]
+    if not files:
+        raise ResultsError(f"{path}: no chunk files; run `gnc-jax run ... --out {path.parent}`")
+    tables = []
+    for f in files:
+        try:
+            tables.append(pq.read_table(f))
+        except (pa.ArrowException, OSError) as e:
+            first = str(e).splitlines()[0] if str(e) else type(e).__name__
+            raise ResultsError(f"{f}: not a readable Parquet file ({first}; truncated?)") from None
     try:
-        table = pq.read_table(path)
-    except (pa.ArrowException, OSError) as e:
-        first = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise ResultsError(f"{path}: not a readable Parquet file ({first}; truncated?)") from None
+        table = pa.concat_tables([t.replace_schema_metadata(None) for t in tables])
+    except pa.ArrowException as e:
+        raise ResultsError(f"{path}: chunk files of different layouts ({e})") from None
     if "status" not in table.column_names:
         raise ResultsError(f"{path}: no 'status' column; not written by gnc_jax")
     if table.num_rows != n_runs:
@@ -146,12 +202,27 @@ def load_results(out_dir) -> tuple[dict, "Any", "Any"]:
         raise ResultsError(
             f"{out}: no such directory; allowed: a directory written by `gnc-jax run ... --out DIR`"
         )
-    for name in ("summary.json", "runs.parquet", "scenario.toml"):
-        if not (out / name).is_file():
-            raise ResultsError(f"{out / name}: missing; run `gnc-jax run ... --out {out}`")
+    manifest = out / "study.json"
+    if manifest.is_file():
+        try:
+            state = json.loads(manifest.read_text()).get("state")
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError, AttributeError):
+            raise ResultsError(f"{manifest}: not a readable study manifest (damaged?)") from None
+        if state != "complete":
+            from .store import chunk_files
+
+            raise ResultsError(
+                f"{out}: a partial study ({len(chunk_files(out))} chunks written, no summary); "
+                "the same `gnc-jax run ... --out DIR` command with --resume completes it"
+            )
+    legacy = not manifest.is_file() and not (out / "runs").is_dir()  # before chunk files
+    runs_path = out / "runs.parquet" if legacy else out / "runs"
+    for path in (out / "summary.json", runs_path, out / "scenario.toml"):
+        if not path.exists():
+            raise ResultsError(f"{path}: missing; run `gnc-jax run ... --out {out}`")
     try:
         summary = _read_summary(out / "summary.json")
-        runs = _read_runs(out / "runs.parquet", summary["runs"])
+        runs = _read_runs(runs_path, summary["runs"])
     except PermissionError as e:
         raise ResultsError(f"{e.filename}: cannot read ({e.strerror})") from None
     try:

@@ -261,7 +261,7 @@ def test_exit_code_follows_the_failed_fraction(tmp_path, capsys, monkeypatch):
     assert (tmp_path / "a" / "summary.json").is_file()  # written before the exit code
     summary = json.loads((tmp_path / "a" / "summary.json").read_text())
     assert 0 < summary["failed"] < 20
-    assert cli.main(argv + ["--max-failed", "0.9"]) == 0
+    assert cli.main(argv + ["--max-failed", "0.9", "--overwrite"]) == 0
 
 
 # ---- report on damaged results --------------------------------------------------------------
@@ -287,11 +287,13 @@ def toy_results(tmp_path_factory):
             "summary.json: not a gnc_jax summary",
         ),
         (
-            lambda d: (d / "runs.parquet").write_bytes((d / "runs.parquet").read_bytes()[:300]),
-            "runs.parquet: not a readable Parquet file",
+            lambda d: (d / "runs" / "chunk-000000.parquet").write_bytes(
+                (d / "runs" / "chunk-000000.parquet").read_bytes()[:300]
+            ),
+            "chunk-000000.parquet: not a readable Parquet file",
         ),
         (lambda d: (d / "scenario.toml").write_text("kind = ["), "scenario.toml: scenario"),
-        (lambda d: (d / "runs.parquet").unlink(), "runs.parquet: missing"),
+        (lambda d: shutil.rmtree(d / "runs"), "runs: missing"),
     ],
 )
 def test_report_on_a_damaged_directory_names_the_file(
@@ -310,8 +312,8 @@ def test_report_on_a_partial_runs_file_says_so(toy_results, tmp_path, capsys):
 
     d = tmp_path / "copy"
     shutil.copytree(toy_results, d)
-    table = pq.read_table(d / "runs.parquet")
-    pq.write_table(table.slice(0, 5), d / "runs.parquet")
+    chunk = d / "runs" / "chunk-000000.parquet"
+    pq.write_table(pq.read_table(chunk).slice(0, 5), chunk)
     assert cli.main(["report", str(d)]) == cli.EXIT_REFUSED
     assert "5 rows, but summary.json says 20 runs" in capsys.readouterr().err
 

@@ -185,7 +185,7 @@ def test_run_writes_results_and_report(tmp_path, capsys):
         "firings_mode",
     ):
         assert key in summary, key
-    table = pq.read_table(out / "runs.parquet")
+    table = pq.read_table(out / "runs")
     assert table.num_rows == 6
     miss = table.column("miss_m").to_numpy()
     assert summary["miss_rms_m"] == pytest.approx(np.sqrt(np.mean(miss**2)))
@@ -236,7 +236,7 @@ def test_pn_run_writes_results_and_report(tmp_path, capsys):
     summary = json.loads((out / "summary.json").read_text())
     for key in ("miss_rms_m", "miss_max_m", "dv_mean_mps", "firings_mean", "ignitions_mean"):
         assert key in summary, key
-    table = pq.read_table(out / "runs.parquet")
+    table = pq.read_table(out / "runs")
     assert {"miss_t_m", "miss_r_m", "dv_mps", "firings", "status_name"} <= set(table.column_names)
     assert cli.main(["report", str(out)]) == 0
     for name in ("command_trace.png", "command_laws.png", "b_plane.png", "dv_firings.png"):
