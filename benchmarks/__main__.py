@@ -25,6 +25,7 @@ SUITE = {
     "numba_impactor": "benchmarks.peers.numba_impactor",
     "basilisk_impactor": "benchmarks.peers.basilisk_impactor",
     "propagation": "benchmarks.peers.propagation",
+    "scale": "benchmarks.scale",
 }
 
 _CHILD = r"""

@@ -16,6 +16,12 @@ def best_of(fn, repeats):
     return min(times)
 
 
+def warmed_best_of(fn, repeats):
+    """:func:`best_of` after one warm-up call (compilation, caches)."""
+    jax.block_until_ready(fn())
+    return best_of(fn, repeats)
+
+
 def python_loop_rate(system, sim, law, runs):
     """Baseline of the closed-loop benchmarks: a Python loop calling the jitted
     single-trajectory function run by run. Returns ``(compile_s, trajectories_per_s)``."""

@@ -62,15 +62,7 @@ SCENARIO = "lunar-skip-entry"
 FIGURES = Path(__file__).resolve().parent / "figures"
 
 
-def _best(fn, repeats):
-    """Best wall time (s) of ``repeats`` calls after one warm-up call."""
-    jax.block_until_ready(fn())
-    best = float("inf")
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        jax.block_until_ready(fn())
-        best = min(best, time.perf_counter() - t0)
-    return best
+from _timing import warmed_best_of as _best  # noqa: E402  (benchmarks/_timing.py)
 
 
 def _compiled(fn, *args):

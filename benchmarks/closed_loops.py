@@ -24,7 +24,6 @@ Timings are best of ``repeats`` after a warm-up, with ``block_until_ready``.
 
 import argparse
 import dataclasses
-import time
 
 import jax
 import jax.numpy as jnp
@@ -34,14 +33,7 @@ import gnc_jax as gj  # first: float64 and one XLA device per core
 PROFILE_BATCH = 1000
 
 
-def _best(fn, repeats):
-    jax.block_until_ready(fn())
-    best = float("inf")
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        jax.block_until_ready(fn())
-        best = min(best, time.perf_counter() - t0)
-    return best
+from _timing import warmed_best_of as _best  # noqa: E402  (benchmarks/_timing.py)
 
 
 def _impactor_bare(sim):
