@@ -234,3 +234,26 @@ def test_dask_cluster_equals_local_and_survives_a_lost_worker(toy, reference, cl
     assert "s" in result
     full = run_study(toy, runs=4000, chunk_size=4000, progress=False).outcomes
     _equal(result["s"].outcomes, full)
+
+
+def test_a_chunk_that_raises_is_reported_and_the_rest_go_on(toy, reference, tmp_path, monkeypatch):
+    distributed = pytest.importorskip("dask.distributed")
+    from gnc_jax import montecarlo
+
+    run_chunk = montecarlo.run_chunk
+
+    def faulty(scenario, seed, start, stop, chunk):
+        if start == 2 * CHUNK:
+            raise FloatingPointError("injected")
+        return run_chunk(scenario, seed, start, stop, chunk)
+
+    monkeypatch.setattr(montecarlo, "run_chunk", faulty)
+    out = tmp_path / "study"
+    with distributed.Client(processes=False, n_workers=1, threads_per_worker=1) as client:
+        with pytest.raises(montecarlo.StudyError, match=r"chunk 2 \(runs 80\.\.119\)") as e:
+            run_study(toy, runs=RUNS, chunk_size=CHUNK, progress=False, client=client, out=out)
+    assert e.value.errors == [dict(chunk=2, runs=[80, 120], error="FloatingPointError: injected")]
+    names = [f.name for f in store.chunk_files(out)]
+    assert len(names) == RUNS // CHUNK - 1 and "chunk-000002.parquet" not in names
+    monkeypatch.setattr(montecarlo, "run_chunk", run_chunk)
+    _equal(run_study(toy, runs=RUNS, progress=False, out=out, resume=True).outcomes, reference)
