@@ -388,7 +388,7 @@ def run_study(
         t0 = time.perf_counter()
         try:
             if distributed:
-                compile_s, errors, n_workers = _run_distributed(
+                compile_s, errors, n_workers, t0 = _run_distributed(
                     scenario, seed, todo, bounds, chunk, client, workers, finished
                 )
                 t0 += compile_s  # the workers compile first, all at once
@@ -539,7 +539,7 @@ def local_cluster(workers: int):
 
 def _run_distributed(scenario, seed, todo, bounds, chunk, client, workers, finished):
     """The chunks ``todo`` as tasks of a Dask client; returns ``(compile time, errors,
-    workers)``. A lost worker's tasks are rerun elsewhere by Dask; a chunk that raises is
+    workers, time.perf_counter() once the cluster was up)``. A lost worker's tasks are rerun elsewhere by Dask; a chunk that raises is
     reported and the others go on."""
     from dask.distributed import as_completed
 
@@ -548,6 +548,7 @@ def _run_distributed(scenario, seed, todo, bounds, chunk, client, workers, finis
         client = local_cluster(workers)
     try:
         n_workers = len(client.scheduler_info()["workers"])
+        t0 = time.perf_counter()
         futures = {
             client.submit(run_chunk, scenario, seed, *bounds[c], chunk, pure=False): c for c in todo
         }
@@ -563,7 +564,7 @@ def _run_distributed(scenario, seed, todo, bounds, chunk, client, workers, finis
             outcomes, cs = fut.result()
             compile_s = max(compile_s, cs)
             finished(c, outcomes)
-        return compile_s, errors, n_workers
+        return compile_s, errors, n_workers, t0
     except BaseException:
         for fut in list(locals().get("futures", ())):
             fut.cancel()
