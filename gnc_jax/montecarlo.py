@@ -539,8 +539,8 @@ def local_cluster(workers: int):
 
 def _run_distributed(scenario, seed, todo, bounds, chunk, client, workers, finished):
     """The chunks ``todo`` as tasks of a Dask client; returns ``(compile time, errors,
-    workers, time.perf_counter() once the cluster was up)``. A lost worker's tasks are rerun elsewhere by Dask; a chunk that raises is
-    reported and the others go on."""
+    workers, time.perf_counter() once the cluster was up)``. A lost worker's tasks are rerun
+    elsewhere by Dask; a chunk that raises is reported and the others go on."""
     from dask.distributed import as_completed
 
     own = client is None
