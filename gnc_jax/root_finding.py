@@ -1,4 +1,4 @@
-"""Bounded regula falsi with a warm start: the bank-angle corrector of seed 003 §3.2 (SPEC §8).
+"""Bounded regula falsi with a warm start: the bank-angle corrector of seed 003 §3.2.
 
 The corrector of a numerical predictor-corrector entry guidance solves S(sigma) = 0 for the bank
 angle, where S is the range error predicted by integrating the trajectory. Seed 003 (eqs. 11-15)

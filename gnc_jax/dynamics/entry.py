@@ -1,4 +1,4 @@
-"""Point-mass (3-DOF) atmospheric entry over a rotating Earth with J2 (seed 003 §1, SPEC §8).
+"""Point-mass (3-DOF) atmospheric entry over a rotating Earth with J2 (seed 003 §1).
 
 Seed 003 writes the equations of motion in its rotating "return frame" (eqs. 1-5). The same
 physics is written here in Earth-centred inertial (ECI) Cartesian coordinates, which keeps the
@@ -69,7 +69,8 @@ class EntryVehicle(eqx.Module):
     """Capsule parameters (what a dispersion draws), SI units.
 
     Defaults: mass and reference area from seed 003 §4.1 (9000 kg, 22 m^2). The seed gives no
-    aerodynamics; SPEC §8 fixes L/D = 0.3 for an Apollo/Orion-class capsule at trim, here as
+    aerodynamics; the skip-entry scenario takes L/D = 0.3 (an Apollo/Orion-class capsule at
+    trim), here as
     C_D = 1.3 and C_L = 0.39 (Apollo trims at C_D ~ 1.2-1.3, L/D ~ 0.3; Orion similar). The
     nose radius is 1.2 times the diameter of a disc of area S (the spherical-segment heat
     shields of Apollo and Orion both have R_n ~ 1.2 D): 6.35 m.

@@ -1,7 +1,8 @@
 # ruff: noqa: F722  (jaxtyping shape strings such as "" and "8 3" are not Python expressions)
 """Analytical heliocentric ephemerides of the eight planets (Simon et al. 1994) and their GMs.
 
-No ephemeris files can be downloaded (SPEC §7), so the planets follow the mean-element theory
+No ephemeris files can be downloaded (the machine is offline), so the planets follow the
+mean-element theory
 of Simon, Bretagnon, Chapront, Chapront-Touzé, Francou and Laskar (1994), "Numerical
 expressions for precession formulae and mean elements for the Moon and the planets",
 Astron. Astrophys. 282, 663, as implemented by SOFA/ERFA ``plan94``: for each planet the mean

@@ -1,5 +1,5 @@
 # ruff: noqa: F722  (jaxtyping shape strings such as "" and "6 3" are not Python expressions)
-"""Heliocentric cruise dynamics: Sun + 8 planets + cannonball solar radiation pressure (SPEC §7).
+"""Heliocentric cruise dynamics: Sun + 8 planets + cannonball solar radiation pressure (seed 001).
 
 Seed 001 (Zhang, Wang, Huang 2009) propagates the Phoenix Earth–Mars transfer with the Sun as
 central body, the eight planets as point-mass perturbations and solar radiation pressure. Here
@@ -41,7 +41,7 @@ from ..geometry.kepler import time_since_periapsis
 from .ephemeris import AU_M, GM_PLANETS, GM_SUN, planet_index, planet_state, planet_states
 
 SOLAR_PRESSURE_1AU = 4.5605e-6
-"""Solar radiation pressure at 1 AU on an absorbing surface, N/m² (SPEC §7)."""
+"""Solar radiation pressure at 1 AU on an absorbing surface, N/m² (seed 001)."""
 
 MARS_RADIUS_M = 3_396_190.0
 """Mars equatorial radius (IAU 2015), m; the impact guard of the encounter event."""

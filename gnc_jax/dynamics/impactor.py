@@ -1,4 +1,4 @@
-"""Impactor motion relative to a small body, with a finite-thrust engine (SPEC §3, §4).
+"""Impactor motion relative to a small body, with a finite-thrust engine (seeds 000 and 002).
 
 The state is Cartesian and inertial, relative to the target's centre of mass: position ``r`` (m),
 velocity ``v`` (m/s) and mass ``m`` (kg). Without perturbations the relative motion is a

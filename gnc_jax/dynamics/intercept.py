@@ -1,4 +1,4 @@
-"""Heliocentric target-impactor dynamics of a deep-space intercept (seed 004 eq. 1; SPEC §6).
+"""Heliocentric target-impactor dynamics of a deep-space intercept (seed 004 eq. 1).
 
 Both bodies move under the Sun's point-mass gravity; the impactor also feels the target's
 gravity and its own thrust (seed 004 eq. 1). The state integrated is Cartesian, inertial (the

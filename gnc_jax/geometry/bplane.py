@@ -1,4 +1,4 @@
-"""B-plane frame and B-plane coordinates (seed 000 §1.1, eqs. 1-2; SPEC §1).
+"""B-plane frame and B-plane coordinates (seed 000 §1.1, eqs. 1-2).
 
 S is along the incoming asymptote (for a small body: the relative velocity), T lies in the
 reference plane (normal ``h``: the target's orbit plane, the ecliptic when none is given) and

@@ -1,5 +1,5 @@
 # ruff: noqa: F722  (jaxtyping shape strings such as "" are not Python expressions)
-"""B-plane of a planet-relative hyperbola: B_T, B_R and the linearised time of flight (SPEC §1, §7).
+"""B-plane of a planet-relative hyperbola: B_T, B_R and the linearised time of flight (seed 001).
 
 For a state (r, v) relative to a planet of gravitational parameter μ on a hyperbola
 (v² > 2μ/r), with h = r × v, e the eccentricity vector (e = |e| > 1) and p̂ = ĥ × ê:
@@ -9,7 +9,8 @@ For a state (r, v) relative to a planet of gravitational parameter μ on a hyper
     B = b S × ĥ                                 (planet → asymptote's crossing of the plane ⟂ S),
     T = S × n̂ / |S × n̂|,   R = S × T,          B_T = B·T,   B_R = B·R,
 
-with n̂ the reference-plane normal (SPEC §1: the ecliptic pole unless stated; T then lies in the
+with n̂ the reference-plane normal (the ecliptic pole unless a scenario says otherwise; T then
+lies in the
 reference plane and R points "south" of it for a prograde approach). The linearised time of
 flight t_TOF is the two-body time from the state to periapsis, by the hyperbolic Kepler equation
 (seed 001 eqs. 27-32, `kepler.time_since_periapsis`): the arrival epoch is t + t_TOF.

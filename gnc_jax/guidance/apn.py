@@ -1,4 +1,4 @@
-"""Variable-coefficient augmented proportional navigation with pulse firing (seed 004; SPEC §6).
+"""Variable-coefficient augmented proportional navigation with pulse firing (seed 004).
 
 Line of sight from the impactor to the target, rho = -r (``r``: impactor minus target):
 

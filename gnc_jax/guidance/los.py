@@ -1,4 +1,4 @@
-"""LOS switching-curve terminal guidance (seed 000 §3; SPEC §3) — "the impactor law".
+"""LOS switching-curve terminal guidance (seed 000 §3) — "the impactor law".
 
 The engine opens when the LOS rate |omega| reaches the switching curve omega_open of the miss
 tolerance rho_max = k1 sqrt(E^2 + F^2) and closes at omega_close of rho_min = k2 sqrt(E^2 + F^2),

@@ -1,4 +1,4 @@
-"""Predictive (Deep Impact style) terminal guidance (seed 000 baseline, seed 002 §3.3; SPEC §4).
+"""Predictive (Deep Impact style) terminal guidance (seed 000 baseline, seed 002 §3.3).
 
 At each scheduled time the on-board predictor integrates the navigation state through the burn
 to the B-plane; the predicted miss Δr_f = B_pred - aim is linearised, Δr_f = K Δv with K the

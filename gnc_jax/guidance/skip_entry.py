@@ -1,4 +1,4 @@
-"""Combined skip-entry guidance of a lunar-return capsule (seed 003; SPEC §8) — "the capsule law".
+"""Combined skip-entry guidance of a lunar-return capsule (seed 003) — "the capsule law".
 
 Phases (seed 003 §2, Fig. 1):
 

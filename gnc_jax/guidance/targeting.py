@@ -1,5 +1,5 @@
 # ruff: noqa: F722  (jaxtyping shape strings such as "n m" are not Python expressions)
-"""Newton B-plane targeting with three sensitivity methods (seed 001 §2; SPEC §7), and the
+"""Newton B-plane targeting with three sensitivity methods (seed 001 §2), and the
 autonomous midcourse-correction law built on it (seed 001 §3).
 
 The terminal parameters Q (B_R, B_T and optionally the arrival epoch) depend on the control

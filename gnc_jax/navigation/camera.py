@@ -1,4 +1,4 @@
-"""Pinhole navigation camera (seed 002 §3.1, measurement model (p, l); SPEC §5).
+"""Pinhole navigation camera (seed 002 §3.1, measurement model (p, l)).
 
 A camera frame has its boresight z_c along the line of sight it points at; the target's image
 coordinates on the focal plane are p = f x_c / z_c and l = f y_c / z_c (m). The filter works with

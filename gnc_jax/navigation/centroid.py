@@ -1,4 +1,4 @@
-"""Optical centroiding of the target in a frame (seed 002 §3.1; SPEC §5).
+"""Optical centroiding of the target in a frame (seed 002 §3.1).
 
 The seed's pipeline, every step with static shapes so it can be ``vmap``ped and scanned:
 

@@ -1,4 +1,4 @@
-"""EKF on the impactor's relative position and velocity (seed 002 §3.2, SPEC §5).
+"""EKF on the impactor's relative position and velocity (seed 002 §3.2).
 
 State x = (r, v): impactor relative to the target, inertial (the B-plane frame is a constant
 rotation of it). Between images the model is straight-line motion plus the Δv the accelerometer

@@ -1,4 +1,4 @@
-"""Synthetic navigation-camera frames of the target (seed 002 §3.1 and §4.2; SPEC §5).
+"""Synthetic navigation-camera frames of the target (seed 002 §3.1 and §4.2).
 
 A frame is a fixed-size region of interest (ROI) of ``roi_px`` x ``roi_px`` (binned) detector
 pixels, placed where the on-board software predicts the target, so every frame of every run has

@@ -1,4 +1,4 @@
-"""Scenario fields of the lunar-return skip entry (seed 003 Tables 1-2; SPEC §8).
+"""Scenario fields of the lunar-return skip entry (seed 003 Tables 1-2).
 
 File units follow the paper (km, km/s, deg, %, 3-sigma dispersions); the simulation is SI.
 """

@@ -1,4 +1,4 @@
-"""Scenario fields of the impactor terminal phase (seed 000 Table 2, seed 002; SPEC §3-5).
+"""Scenario fields of the impactor terminal phase (seed 000 Table 2, seed 002).
 
 File units follow the papers (km, km/s, urad, ug, %) and are converted to SI when the
 simulation is built; the field names carry the units.

@@ -1,4 +1,4 @@
-"""Scenario fields of the autonomous midcourse correction (seed 001; SPEC §7).
+"""Scenario fields of the autonomous midcourse correction (seed 001).
 
 File units follow the paper (km, m/s, days, %, deg; epochs as TDB calendar strings) and are
 converted to SI when the simulation is built; the field names carry the units. Vectors are in

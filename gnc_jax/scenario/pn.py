@@ -1,4 +1,4 @@
-"""Scenario fields of the variable-coefficient augmented PN intercept (seed 004; SPEC §6).
+"""Scenario fields of the variable-coefficient augmented PN intercept (seed 004).
 
 File units follow the paper (km, km/s, AU, deg, urad) and are converted to SI when the
 simulation is built; the field names carry the units. Where the paper is silent (engine,

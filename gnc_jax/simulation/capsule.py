@@ -1,4 +1,4 @@
-"""Closed-loop lunar-return skip entry with the combined guidance of seed 003 (SPEC §8).
+"""Closed-loop lunar-return skip entry with the combined guidance of seed 003.
 
 One dispersed trajectory per call. The truth integrates the Cartesian 3-DOF dynamics (RK4,
 ``dt_s``) with the dispersed vehicle and atmosphere and the bank angle actually flown (finite

@@ -1,5 +1,5 @@
 # ruff: noqa: F722  (jaxtyping shape strings such as "n" are not Python expressions)
-"""Autonomous midcourse correction of an Earth–Mars transfer (seed 001 §3-4; SPEC §7).
+"""Autonomous midcourse correction of an Earth–Mars transfer (seed 001 §3-4).
 
 One dispersed run per call (`simulate`); Monte Carlo batches ``vmap`` it over per-run keys.
 The run starts at the first navigation fix (the paper's E-238 d) on the nominal transfer plus
@@ -603,7 +603,7 @@ def design_nominal(sim: MidcourseSimulation, t_launch_s: float) -> NominalTransf
 
 
 def reference_normal(plane: str, t_encounter_s: float) -> Vector3:
-    """Normal of the B-plane reference plane in EME2000 (SPEC §1)."""
+    """Normal of the B-plane reference plane in EME2000 (the ecliptic pole)."""
     if plane == "ecliptic":
         return jnp.asarray(ECLIPTIC_POLE_EQUATORIAL)
     if plane == "equator":

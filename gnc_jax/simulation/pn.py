@@ -1,4 +1,4 @@
-"""Closed-loop deep-space intercept with augmented PN and pulse firing (seed 004; SPEC §6).
+"""Closed-loop deep-space intercept with augmented PN and pulse firing (seed 004).
 
 One trajectory per call (`simulate`); Monte Carlo batches ``vmap`` it over per-run keys. Time
 is mission time from the Table 2 initial state (s). Nested ``lax.scan`` loops: blocks of

@@ -1,4 +1,4 @@
-"""Image front end: render the frame, centroid it, correct the phase (seed 002 §3.1; SPEC §5).
+"""Image front end: render the frame, centroid it, correct the phase (seed 002 §3.1).
 
 The on-board software places the region of interest where its estimate predicts the target
 (the filter's predicted angles, through its attitude estimate), with a binning that fits the
