@@ -68,6 +68,8 @@ def _print_summary(summary: dict) -> None:
         if key in skip:
             continue
         text = f"{value:.4g}" if isinstance(value, float) else str(value)
+        if isinstance(value, list) and value and all(isinstance(v, float) for v in value):
+            text = "[" + ", ".join(f"{v:.4g}" for v in value) + "]"
         print(f"  {key:<{width}}  {text}")
     if summary.get("failed_by_status"):
         print(f"  {'failed_by_status':<{width}}  {summary['failed_by_status']}")

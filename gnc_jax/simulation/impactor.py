@@ -30,6 +30,7 @@ from ..dynamics.impactor import (
 )
 from ..geometry.bplane import b_plane_frame, check_b_plane_frame
 from ..geometry.ellipse import b_plane_position_covariance, mean_position_error
+from ..geometry.silhouette import focusing_factor, silhouette_matrix, silhouette_ratio
 from ..guidance.base import AbstractImpactorGuidance, ImpactorGuidanceContext
 from ..navigation.camera import camera_attitude, small_rotation
 from ..navigation.ekf import (
@@ -231,6 +232,8 @@ class ImpactorOutcome(NamedTuple):
     accel_bias_mps2: Vector3
     los_error_rms_urad: Scalar  # per-axis RMS of (measured - true) LOS angles over used images
     images_rejected: Array  # int, images without a valid centroid (no filter update)
+    # B-plane impact point in units of the target's silhouette (< 1: a hit, geometry.silhouette)
+    silhouette_ratio: Scalar
 
 
 class StepRecord(NamedTuple):
@@ -578,7 +581,24 @@ def _outcome(sim: ImpactorSimulation, carry: _Carry, draws) -> ImpactorOutcome:
         los_error_rms_urad=1e6
         * jnp.sqrt(carry.los_error_sq / jnp.maximum(2 * carry.images_used, 1)),
         images_rejected=(sim.n_images - carry.images_used).astype(jnp.int32),
+        silhouette_ratio=silhouette_ratio(b, _silhouette(sim), _focusing(sim)),
     )
+
+
+def _silhouette(sim: ImpactorSimulation):
+    """The target's shadow along S in the B-plane (m^2, :mod:`gnc_jax.geometry.silhouette`)."""
+    return silhouette_matrix(sim.target.semi_axes_m, sim.target.c_bi, sim.context.c_bi)
+
+
+def _focusing(sim: ImpactorSimulation):
+    speed = jnp.linalg.norm(sim.v0_mps)
+    return focusing_factor(sim.dynamics.mu_target, sim.target.mean_radius_m, speed)
+
+
+def capture_silhouette(sim: ImpactorSimulation) -> Float[Array, "2 2"]:
+    """The B-plane ellipse (shape matrix, m^2) whose inside is a hit: the silhouette widened
+    by gravitational focusing."""
+    return _silhouette(sim) * _focusing(sim) ** 2
 
 
 def simulate(
