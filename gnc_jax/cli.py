@@ -62,7 +62,7 @@ def _too_many_failed(summary: dict, max_failed: float) -> bool:
 
 
 def _print_summary(summary: dict) -> None:
-    skip = {"paper", "firings_histogram", "failed_by_status", "description"}
+    skip = {"paper", "firings_histogram", "failed_by_status", "description", "warnings"}
     width = max(len(k) for k in summary)
     for key, value in summary.items():
         if key in skip:
@@ -82,6 +82,14 @@ def _print_summary(summary: dict) -> None:
         print("  paper vs gnc_jax:")
         for metric, paper, ours in rows:
             print(f"    {metric:<16} {paper:>10} {ours:>10}")
+
+
+def _print_warnings(scenario) -> None:
+    """The scenario's warnings (valid but doubtful settings), one line each, on stderr."""
+    from .systems import get_system
+
+    for line in get_system(scenario.kind).warnings(scenario.config):
+        print(f"gnc-jax: warning: {line}", file=sys.stderr)
 
 
 def cmd_list(args) -> int:
@@ -133,6 +141,7 @@ def cmd_run(args) -> int:
     scenario = load_scenario(args.scenario, overrides=args.set or ())
     if args.out:
         _writable_dir(args.out)
+    _print_warnings(scenario)
     study = run_study(
         scenario,
         runs=args.runs,

@@ -51,6 +51,9 @@ def summarize(study) -> dict[str, Any]:
     system = get_system(sc.kind)
     if system.laws():
         out["law"] = sc.config["guidance"]["law"]
+    warnings = system.warnings(sc.config)
+    if warnings:
+        out["warnings"] = warnings
     if ok.any():
         out.update(system.statistics(study.outcomes, ok))
     else:

@@ -149,6 +149,15 @@ class AbstractSystem(abc.ABC):
         """Cross-field checks of a validated configuration (raise :class:`ScenarioError`)."""
         return None
 
+    def warnings(self, config: dict) -> list[str]:
+        """One-line warnings about a valid but doubtful configuration: the law's (its
+        ``warnings``); printed by the CLI before a study and kept in ``summary.json``."""
+        laws = self.laws()
+        if not laws:
+            return []
+        law = laws[config["guidance"]["law"]]
+        return list(law.warnings(config["guidance"][law.law_name], config))
+
     # ---- simulation ----
     def build_law(self, config: dict, ctx=None):
         """The guidance law a validated configuration flies (``None`` without a family)."""
