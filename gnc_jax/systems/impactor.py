@@ -88,6 +88,9 @@ def _impactor_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, 
             los_error_rms_urad_mean=float(np.mean(o["los_error_rms_urad"][ok])),
             images_rejected_max=int(np.max(o["images_rejected"][ok])),
             images_rejected_mean=float(np.mean(o["images_rejected"][ok])),
+            innovations_outside_mean=float(np.mean(o["innovations_outside"][ok])),
+            innovations_outside_max=int(np.max(o["innovations_outside"][ok])),
+            nav_lost=int(np.sum(o["status"] == Status.nav_lost)),
         )
     return out
 
