@@ -1,4 +1,4 @@
-"""Command line: ``gnc-jax list | run | reproduce | report``.
+"""Command line: ``gnc-jax list | run | reproduce | envelope | report``.
 
 Every command is one or two calls of the Python API (``gnc_jax.load_scenario``,
 ``gnc_jax.run_study``, ``Study.save``, ``gnc_jax.reproduce``, ``gnc_jax.report``). Bad input
@@ -200,6 +200,21 @@ def cmd_reproduce(args) -> int:
     return 0
 
 
+def cmd_envelope(args) -> int:
+    from .operating_envelope import envelope
+    from .scenario import load_scenario
+
+    scenario = load_scenario(args.scenario, overrides=args.set or ())
+    _writable_dir(args.out)
+    _print_warnings(scenario)
+    options = {} if args.load_limit_g is None else {"load_limit_g": args.load_limit_g}
+    env = envelope(
+        scenario, args.grid, runs=args.runs, seed=args.seed, out=args.out, progress=True, **options
+    )
+    print(f"wrote {args.out}/cells.parquet and {len(env.metrics)} heat maps")
+    return 0
+
+
 def cmd_report(args) -> int:
     from .report import report
 
@@ -272,6 +287,28 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--no-progress", action="store_true")
     _study_limits(q)
     q.set_defaults(func=cmd_reproduce)
+
+    q = sub.add_parser("envelope", help="a grid of studies over scenario fields, heat maps")
+    q.add_argument("scenario", help="packaged scenario name (gnc-jax list) or a .toml path")
+    q.add_argument(
+        "--grid",
+        action="append",
+        required=True,
+        metavar="SECTION.FIELD=A:B:N",
+        help="an axis: N values from A to B (or V1,V2,...); repeatable, e.g. "
+        "--grid entry.fpa_deg=-6.5:-5.5:5 --grid entry.range_km=2500:10000:4",
+    )
+    q.add_argument("--runs", type=_positive_int("--runs"), default=200, help="runs per cell")
+    q.add_argument("--seed", type=_seed, default=None, help="root seed (default: scenario's)")
+    q.add_argument("--out", required=True, help="directory for cells.parquet and the PNGs")
+    q.add_argument("--set", action="append", metavar="SECTION.FIELD=VALUE", help="override a field")
+    q.add_argument(
+        "--load-limit-g",
+        type=_number("--load-limit-g", float, lambda v: 0 < v < 100, "a number in (0, 100)"),
+        default=None,
+        help="capsule: the entry corridor's load limit (default 10 g)",
+    )
+    q.set_defaults(func=cmd_envelope)
 
     q = sub.add_parser("report", help="PNG figures of a study directory")
     q.add_argument("dir", help="directory written by gnc-jax run --out")

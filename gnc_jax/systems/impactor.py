@@ -279,6 +279,12 @@ class ImpactorSystem(AbstractSystem):
         **IMPACT_LABELS,
         "los_error_rms_urad_mean": "LOS meas. error RMS (µrad)",
     }
+    envelope_metrics: ClassVar[dict[str, str]] = {
+        "hit_probability": "hit probability",
+        "dv_mean_mps": "Δv mean (m/s)",
+        "miss_rms_m": "miss RMS (m)",
+        "failed_fraction": "failed fraction",
+    }
     example = "deep-impact-los"
     # a 15-minute approach: the whole chain (images, EKF, both laws, retarget, cut-off) in a
     # tenth of the steps
