@@ -36,8 +36,8 @@ def ellipse_xy(mean, cov, k, n=200):
 
 
 def envelope_figures(env, out: pathlib.Path) -> list[pathlib.Path]:
-    """One PNG per metric of an envelope (:mod:`gnc_jax.operating_envelope`): a heat map over two grid
-    axes (a line over one; none beyond two), infeasible cells hatched, refused cells marked,
+    """One PNG per metric of an envelope (:mod:`gnc_jax.operating_envelope`): a heat map over
+    two grid axes (a line over one; none beyond two), infeasible and refused cells marked,
     and the system's overlay (:meth:`~gnc_jax.systems.AbstractSystem.envelope_overlay`)."""
     keys = list(env.axes)
     if len(keys) > 2:
