@@ -11,8 +11,9 @@ import gnc_jax as gj
 from gnc_jax import cli
 from gnc_jax import operating_envelope as envelope_module
 from gnc_jax.dynamics.entry import EntryState, entry_state_from_conditions
-from gnc_jax.guidance.corridor import DT_S, entry_envelope, fly_constant_bank
+from gnc_jax.guidance.corridor import DT_S, fly_constant_bank
 from gnc_jax.guidance.entry_common import flight_variables
+from gnc_jax.systems.capsule import entry_envelope
 from gnc_jax.systems.impactor import ImpactorSystem
 
 

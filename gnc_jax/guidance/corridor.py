@@ -46,8 +46,11 @@ class OpenLoopFlight(NamedTuple):
     peak_load_g: Scalar
 
 
-def fly_constant_bank(model: EntryModel, entry: EntryConditions, bank_rad, chute_m, steps: int):
-    """One open-loop flight of ``steps`` RK4 steps of ``DT_S`` at constant bank (rad)."""
+def fly_constant_bank(
+    model: EntryModel, entry: EntryConditions, bank_rad: Scalar, chute_m: Scalar, steps: int
+) -> OpenLoopFlight:
+    """One open-loop flight of ``steps`` RK4 steps of ``DT_S`` at constant bank (rad), from
+    the entry interface to the chute altitude ``chute_m`` (the state freezes there)."""
     earth = model.earth
     y0 = entry_state_from_conditions(entry, earth)
     cos_b = jnp.cos(bank_rad)
@@ -217,14 +220,4 @@ class EntryEnvelope:
         return float(lo), float(hi)
 
 
-def entry_envelope(config: dict, load_limit_g: float) -> EntryEnvelope:
-    """The :class:`EntryEnvelope` of a validated capsule configuration."""
-    from ..simulation.capsule import _nominal  # the scenario's nominal Earth, vehicle, entry
-
-    earth, vehicle, atmosphere, entry = _nominal(config)
-    model = EntryModel(vehicle, earth, atmosphere)
-    chute = config["entry"]["chute_altitude_km"] * 1e3
-    return EntryEnvelope(model, entry, chute, config["simulation"]["max_time_s"], load_limit_g)
-
-
-__all__ = ["OpenLoopFlight", "fly_constant_bank", "Corridor", "EntryEnvelope", "entry_envelope"]
+__all__ = ["OpenLoopFlight", "fly_constant_bank", "Corridor", "EntryEnvelope"]

@@ -13,7 +13,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._status import Status
-from ..guidance.entry_common import AbstractEntryGuidance
+from ..guidance.corridor import EntryEnvelope
+from ..guidance.entry_common import AbstractEntryGuidance, EntryModel
 from ..montecarlo import simulate_traces
 from ..plotting import ellipse_xy, pyplot, saver
 from ..scenario import capsule as capsule_scenario
@@ -221,6 +222,15 @@ def capsule_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib.
     return files
 
 
+def entry_envelope(config: dict, load_limit_g: float) -> EntryEnvelope:
+    """The entry corridor and footprint (:class:`~gnc_jax.guidance.corridor.EntryEnvelope`)
+    of a validated capsule configuration's nominal vehicle, atmosphere and entry."""
+    earth, vehicle, atmosphere, entry = capsule_sim.nominal_models(config)
+    model = EntryModel(vehicle, earth, atmosphere)
+    chute = config["entry"]["chute_altitude_km"] * 1e3
+    return EntryEnvelope(model, entry, chute, config["simulation"]["max_time_s"], load_limit_g)
+
+
 @register_system
 class CapsuleSystem(AbstractSystem):
     name = "capsule"
@@ -301,8 +311,6 @@ class CapsuleSystem(AbstractSystem):
         limit even with full lift up (undershoot) is infeasible. Columns: the corridor's ends
         and the reachable footprint (constant-bank extreme chute ranges) at the cell's angle,
         and whether the target lies inside it."""
-        from ..guidance.corridor import entry_envelope
-
         limit = self.LOAD_LIMIT_G if load_limit_g is None else float(load_limit_g)
         field = capsule_scenario.SCHEMA["entry"]["fpa_deg"]
         out, corridors = [], {}
@@ -351,8 +359,6 @@ class CapsuleSystem(AbstractSystem):
         """The entry corridor (lines at its ends) when an axis is ``entry.fpa_deg``, and the
         reachable footprint (shortest and longest constant-bank chute range against the
         angle) when the other is ``entry.range_km``."""
-        from ..guidance.corridor import entry_envelope
-
         cells = envelope.cells
         if "entry.fpa_deg" not in (x_key, y_key) or not cells:
             return
