@@ -145,7 +145,9 @@ def envelope(
     t_all = time.perf_counter()
     for n, ((point, cell), check) in enumerate(zip(cells, checks)):
         row: dict[str, Any] = {"cell": n, **point, **check.get("columns", {})}
-        where = ", ".join(f"{k}={v:g}" for k, v in point.items())
+        where = ", ".join(
+            f"{k}={v:g}" if isinstance(v, (int, float)) else f"{k}={v}" for k, v in point.items()
+        )
         head = f"[{n + 1}/{len(cells)}] {where}:"
         if not check.get("feasible", True):
             row.update(status=INFEASIBLE, reason=check.get("reason", ""))

@@ -87,7 +87,16 @@ def _envelope_map(fig, ax, env, keys, xs, ys, metric, label):
     for i, y in enumerate(ys):
         for j, x in enumerate(xs):
             if status[i, j] == "simulated" and np.isfinite(grid[i, j]):
-                ax.text(x, y, f"{grid[i, j]:.3g}", ha="center", va="center", fontsize=7, color="w")
+                light = mesh.norm(grid[i, j]) > 0.6  # viridis is light at its top
+                ax.text(
+                    x,
+                    y,
+                    f"{grid[i, j]:.3g}",
+                    ha="center",
+                    va="center",
+                    fontsize=7,
+                    color="k" if light else "w",
+                )
             elif status[i, j] in ("infeasible", "refused"):
                 ax.text(
                     x,
