@@ -57,8 +57,10 @@ def impact_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any
 
 
 HIT_RULE = (
-    "hit: the B-plane impact point inside the target's silhouette along S (the [target] "
-    "ellipsoid's shadow, widened by gravitational focusing); ok runs, 95 % Wilson interval"
+    "hit: the B-plane impact point inside the target's silhouette along S (the shadow of the "
+    "target as the scenario defines it: the [target] ellipsoid, or the sphere of "
+    "dynamics.target_radius_m of an intercept), widened by gravitational focusing; ok runs, "
+    "95 % Wilson interval"
 )
 
 
