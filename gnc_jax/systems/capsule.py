@@ -327,7 +327,13 @@ class CapsuleSystem(AbstractSystem):
             lo, hi = env.footprint(fpa)
             rng = cfg["entry"]["range_km"]
             feasible = cor.contains(fpa)
-            if not feasible:
+            if not feasible and not cor.undershoot_deg <= cor.overshoot_deg:
+                reason = (
+                    f"no entry angle in [{field.lo:g}, {field.hi:g}] deg is both captured with "
+                    f"full lift down and within {limit:g} g with full lift up at this speed and "
+                    "vehicle"
+                )
+            elif not feasible:
                 side = (
                     "overshoot (skips out with full lift down)"
                     if fpa > cor.overshoot_deg
