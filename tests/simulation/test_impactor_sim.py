@@ -74,11 +74,12 @@ def test_hit_probability_counts_impacts_inside_the_target():
     sc = gj.load_scenario(
         "deep-impact-los", overrides=SHORT + [f"target.semi_axes_km=[{radius_km}, 3.2, 3.2]"]
     )
-    study = gj.run_study(sc, runs=24, seed=3, progress=False, n_devices=1)
+    # 20 runs on every device: the compiled program of test_the_law_corrects_the_delivery_error
+    study = gj.run_study(sc, runs=20, seed=3, progress=False)
     s = study.summary()
     o = study.outcomes
     hits = int(np.sum(np.hypot(o["b_t_m"], o["b_r_m"]) < radius_km * 1e3))
-    assert 0 < hits < 24 and s["failed"] == 0
-    assert s["hits"] == hits and s["hit_probability"] == hits / 24
-    ci = stats.binomtest(hits, 24).proportion_ci(method="wilson")
+    assert 0 < hits < 20 and s["failed"] == 0
+    assert s["hits"] == hits and s["hit_probability"] == hits / 20
+    ci = stats.binomtest(hits, 20).proportion_ci(method="wilson")
     np.testing.assert_allclose(s["hit_probability_ci95"], [ci.low, ci.high], atol=1e-12)
