@@ -17,6 +17,7 @@ alone; see ``gnc_jax._config``); import it before anything runs a JAX computatio
 from . import _config  # noqa: F401  (float64, host devices: must run before jax is used)
 from ._status import Status
 from .montecarlo import CostEstimate, Study, build, estimate_cost, run_key, run_study, simulate_one
+from .operating_envelope import Envelope, envelope
 from .report import report
 from .reproduction import reproduce
 from .results import ResultsError, load_results
@@ -27,6 +28,8 @@ __version__ = "0.1.0"
 
 __all__ = [
     "Status",
+    "Envelope",
+    "envelope",
     "Study",
     "build",
     "AbstractSystem",

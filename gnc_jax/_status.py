@@ -16,6 +16,8 @@ class Status(enum.IntEnum):
     time_out = 4  # the run did not reach its terminal condition in the allotted time
     out_of_domain = 5  # the state left the model's domain (e.g. a miss larger than the range)
     propellant = 6  # the engine needed more propellant than the vehicle carries
+    nav_lost = 7  # navigation lost the target (most images unused, or innovations persistently
+    # beyond their covariance: see gnc_jax.navigation.ekf.NAV_LOST_*)
 
     @classmethod
     def name_of(cls, code: int) -> str:

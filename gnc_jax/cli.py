@@ -1,4 +1,4 @@
-"""Command line: ``gnc-jax list | run | reproduce | report``.
+"""Command line: ``gnc-jax list | run | reproduce | envelope | report``.
 
 Every command is one or two calls of the Python API (``gnc_jax.load_scenario``,
 ``gnc_jax.run_study``, ``Study.save``, ``gnc_jax.reproduce``, ``gnc_jax.report``). Bad input
@@ -62,12 +62,14 @@ def _too_many_failed(summary: dict, max_failed: float) -> bool:
 
 
 def _print_summary(summary: dict) -> None:
-    skip = {"paper", "firings_histogram", "failed_by_status", "description"}
+    skip = {"paper", "firings_histogram", "failed_by_status", "description", "warnings"}
     width = max(len(k) for k in summary)
     for key, value in summary.items():
         if key in skip:
             continue
         text = f"{value:.4g}" if isinstance(value, float) else str(value)
+        if isinstance(value, list) and value and all(isinstance(v, float) for v in value):
+            text = "[" + ", ".join(f"{v:.4g}" for v in value) + "]"
         print(f"  {key:<{width}}  {text}")
     if summary.get("failed_by_status"):
         print(f"  {'failed_by_status':<{width}}  {summary['failed_by_status']}")
@@ -80,6 +82,14 @@ def _print_summary(summary: dict) -> None:
         print("  paper vs gnc_jax:")
         for metric, paper, ours in rows:
             print(f"    {metric:<16} {paper:>10} {ours:>10}")
+
+
+def _print_warnings(scenario) -> None:
+    """The scenario's warnings (valid but doubtful settings), one line each, on stderr."""
+    from .systems import get_system
+
+    for line in get_system(scenario.kind).warnings(scenario.config):
+        print(f"gnc-jax: warning: {line}", file=sys.stderr)
 
 
 def cmd_list(args) -> int:
@@ -152,6 +162,7 @@ def cmd_run(args) -> int:
         _writable_dir(args.out)
     elif args.resume or args.overwrite:
         raise ScenarioError("--resume/--overwrite: no --out DIR; allowed: with --out DIR")
+    _print_warnings(scenario)
     client = None
     if args.scheduler:
         client = _connect(args.scheduler)
@@ -218,6 +229,21 @@ def cmd_reproduce(args) -> int:
             f"gnc-jax: failed runs above --max-failed {args.max_failed:g}: {names}", file=sys.stderr
         )
         return EXIT_FAILED_RUNS
+    return 0
+
+
+def cmd_envelope(args) -> int:
+    from .operating_envelope import envelope
+    from .scenario import load_scenario
+
+    scenario = load_scenario(args.scenario, overrides=args.set or ())
+    _writable_dir(args.out)
+    _print_warnings(scenario)
+    options = {} if args.load_limit_g is None else {"load_limit_g": args.load_limit_g}
+    env = envelope(
+        scenario, args.grid, runs=args.runs, seed=args.seed, out=args.out, progress=True, **options
+    )
+    print(f"wrote {args.out}/cells.parquet and {len(env.metrics)} heat maps")
     return 0
 
 
@@ -319,6 +345,28 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--no-progress", action="store_true")
     _study_limits(q)
     q.set_defaults(func=cmd_reproduce)
+
+    q = sub.add_parser("envelope", help="a grid of studies over scenario fields, heat maps")
+    q.add_argument("scenario", help="packaged scenario name (gnc-jax list) or a .toml path")
+    q.add_argument(
+        "--grid",
+        action="append",
+        required=True,
+        metavar="SECTION.FIELD=A:B:N",
+        help="an axis: N values from A to B (or V1,V2,...); repeatable, e.g. "
+        "--grid entry.fpa_deg=-6.5:-5.5:5 --grid entry.range_km=2500:10000:4",
+    )
+    q.add_argument("--runs", type=_positive_int("--runs"), default=200, help="runs per cell")
+    q.add_argument("--seed", type=_seed, default=None, help="root seed (default: scenario's)")
+    q.add_argument("--out", required=True, help="directory for cells.parquet and the PNGs")
+    q.add_argument("--set", action="append", metavar="SECTION.FIELD=VALUE", help="override a field")
+    q.add_argument(
+        "--load-limit-g",
+        type=_number("--load-limit-g", float, lambda v: 0 < v < 100, "a number in (0, 100)"),
+        default=None,
+        help="capsule: the entry corridor's load limit (default 10 g)",
+    )
+    q.set_defaults(func=cmd_envelope)
 
     q = sub.add_parser("report", help="PNG figures of a study directory")
     q.add_argument("dir", help="directory written by gnc-jax run --out")

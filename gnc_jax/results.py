@@ -86,6 +86,9 @@ def summarize(study) -> dict[str, Any]:
         out["law"] = sc.config["guidance"]["law"]
     if study.workers:
         out["dask_workers"] = study.workers
+    warnings = system.warnings(sc.config)
+    if warnings:
+        out["warnings"] = warnings
     if ok.any():
         out.update(system.statistics(_statistics_outcomes(study, system), ok))
     else:

@@ -106,6 +106,12 @@ class AbstractGuidanceLaw(eqx.Module):
         whole scenario; raise :class:`~gnc_jax.scenario.ScenarioError` with one line."""
 
     @classmethod
+    def warnings(cls, section: dict, config: dict) -> list[str]:
+        """One-line warnings about a valid but doubtful ``[guidance.<law>]`` table (printed by
+        the CLI, recorded in ``summary.json``). Default: none."""
+        return []
+
+    @classmethod
     def from_config(cls, section: dict, config: dict, ctx=None):
         """The law of a validated scenario: ``section`` is its ``[guidance.<law>]`` table,
         ``config`` the whole scenario (for laws whose SI values depend on other sections),

@@ -17,7 +17,7 @@ import jax.numpy as jnp
 from .._numerics import smooth_norm
 from .._types import Array, Float, Scalar, Vector3
 from ..dynamics.impactor import ImpactorState, coast_to_b_plane, propagate
-from ..params import param
+from ..params import from_config, param
 from ..scenario.impactor import time_of_flight_s
 from ..scenario.schema import ScenarioError
 from .base import (
@@ -42,14 +42,23 @@ class PredictiveGuidanceState(NamedTuple):
 @register_law("predictive")
 class PredictiveGuidance(AbstractImpactorGuidance):
     """Scheduled predictive guidance. ``burn_times_s``: mission times of the burns (seed 002:
-    1200, 4100, 6450, 6780 s), at most one per image interval."""
+    1200, 4100, 6450, 6780 s), at most one per image interval; or ``burn_tgo_s``: the same
+    schedule as times to go before the nominal impact (seed 002: 6000, 3100, 750, 420 s), which
+    scales with the approach's duration and, when given, replaces ``burn_times_s``."""
 
     burn_times_s: Float[Array, " n"] = param(
         [1200.0, 4100.0, 6450.0, 6780.0],
         lo=0.0,
         min_length=1,
         units="s",
-        doc="mission times of the burns",
+        doc="mission times of the burns (ignored when burn_tgo_s is given)",
+    )
+    burn_tgo_s: Float[Array, " m"] = param(
+        [],
+        lo=0.0,
+        units="s",
+        doc="times to go before the nominal impact of the burns, decreasing (e.g. seed 002: "
+        "[6000, 3100, 750, 420]); empty: burn_times_s is the schedule",
     )
     tolerance_m: Scalar = param(
         0.1,
@@ -62,21 +71,42 @@ class PredictiveGuidance(AbstractImpactorGuidance):
     newton_iterations: int = param(4, lo=1, hi=50, doc="Newton iterations per burn")
     predictor_steps: int = param(4, lo=1, hi=10000, doc="RK4 steps per predictor segment")
 
+    @staticmethod
+    def schedule(section, config) -> tuple[list[float], str]:
+        """The burns' mission times (s) of a validated scenario and the field that gave them:
+        ``burn_tgo_s`` converted (t = time of flight - t_go, rounded to 1 us like every time
+        derived from the time of flight) when given, else ``burn_times_s``."""
+        tgo = section.get("burn_tgo_s") or []
+        if tgo:
+            tof = round(time_of_flight_s(config), 6)
+            return [round(tof - x, 6) for x in tgo], "guidance.predictive.burn_tgo_s"
+        return list(section["burn_times_s"]), "guidance.predictive.burn_times_s"
+
     @classmethod
     def check(cls, section, config):
         cam, g = config["camera"], config["guidance"]
-        bt = section["burn_times_s"]
-        if any(b2 <= b1 for b1, b2 in zip(bt, bt[1:])):
-            raise ScenarioError(
-                f"guidance.predictive.burn_times_s: {bt} s; allowed: increasing mission times"
-            )
-        t_cut = time_of_flight_s(config) - g["cutoff_tgo_s"]
         tof = time_of_flight_s(config)
+        t_cut = tof - g["cutoff_tgo_s"]
+        tgo = section.get("burn_tgo_s") or []
+        outside = [x for x in tgo if not g["cutoff_tgo_s"] < x <= tof]
+        if outside:
+            raise ScenarioError(
+                f"guidance.predictive.burn_tgo_s: a burn {outside[0]:g} s before impact is "
+                f"outside the guided arc; allowed: times to go in ({g['cutoff_tgo_s']:g}, "
+                f"{tof:g}] s (after guidance.cutoff_tgo_s, within the time of flight)"
+            )
+        if any(x2 >= x1 for x1, x2 in zip(tgo, tgo[1:])):
+            raise ScenarioError(
+                f"guidance.predictive.burn_tgo_s: {tgo} s; allowed: decreasing times to go"
+            )
+        bt, name = cls.schedule(section, config)
+        if any(b2 <= b1 for b1, b2 in zip(bt, bt[1:])):
+            raise ScenarioError(f"{name}: {bt} s; allowed: increasing mission times")
         late = [b for b in bt if b >= t_cut]
         if late:
             or_cutoff = f", or guidance.cutoff_tgo_s < {tof - max(bt):g} s" if tof > max(bt) else ""
             raise ScenarioError(
-                f"guidance.predictive.burn_times_s: the burn at {late[0]:g} s is not before the "
+                f"{name}: the burn at {late[0]:g} s is not before the "
                 f"cut-off at {t_cut:g} s (time of flight {tof:g} s - guidance.cutoff_tgo_s "
                 f"{g['cutoff_tgo_s']:g} s); allowed: burns before {t_cut:g} s{or_cutoff}"
             )
@@ -85,19 +115,42 @@ class PredictiveGuidance(AbstractImpactorGuidance):
             raise ScenarioError(
                 f"guidance.retarget_tgo_s: the aim point changes at {t_retarget:g} s (time of "
                 f"flight {tof:g} s - {g['retarget_tgo_s']:g} s), after the last burn of "
-                f"guidance.predictive.burn_times_s ({bt[-1]:g} s), so the new aim point is never "
+                f"{name} ({bt[-1]:g} s), so the new aim point is never "
                 f"flown; allowed: a burn at or after {t_retarget:g} s (and before the cut-off at "
                 f"{t_cut:g} s), or retarget_tgo_s >= {tof - bt[-1]:g} s"
             )
         for b1, b2 in zip(bt, bt[1:]):
             if b2 - b1 < cam["image_interval_s"]:
-                gap = f"the burns at {b1:g} and {b2:g} s of guidance.predictive.burn_times_s"
+                gap = f"the burns at {b1:g} and {b2:g} s of {name}"
                 raise ScenarioError(
                     f"camera.image_interval_s: {cam['image_interval_s']:g} s is longer than the "
                     f"{b2 - b1:g} s between {gap} (one image between burns); allowed: "
                     f"image_interval_s <= {b2 - b1:g} s, or burns increasing and at least one "
                     "image interval apart"
                 )
+
+    @classmethod
+    def warnings(cls, section, config) -> list[str]:
+        """A last burn in the first half of the guided arc: the rest of the approach is flown
+        uncorrected, so the last burn's execution and navigation errors act over more than
+        half the arc (seed 002 places it 420 s, 6 % of the arc, before impact). Allowed, but
+        usually a schedule left over from another approach's timeline."""
+        bt, name = cls.schedule(section, config)
+        tof = time_of_flight_s(config)
+        arc = tof - config["guidance"]["cutoff_tgo_s"]
+        if bt and bt[-1] < 0.5 * arc:
+            return [
+                f"{name}: the last burn is at {bt[-1]:g} s, {tof - bt[-1]:g} s before impact, in "
+                f"the first half of the {arc:g} s guided arc; the rest is flown uncorrected "
+                "(schedules that scale with the approach: guidance.predictive.burn_tgo_s)"
+            ]
+        return []
+
+    @classmethod
+    def from_config(cls, section, config, ctx=None):
+        """The law with its schedule in mission times (``burn_tgo_s`` converted)."""
+        bt, _ = cls.schedule(section, config)
+        return from_config(cls, section, burn_times_s=jnp.asarray(bt, dtype=jnp.float64))
 
     def init(self, nav, ctx: ImpactorGuidanceContext) -> PredictiveGuidanceState:
         z = jnp.zeros(())

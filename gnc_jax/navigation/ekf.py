@@ -17,6 +17,35 @@ from .camera import los_angles
 
 _S_FLOOR = 1e-200  # added to the innovation covariance's diagonal (see ekf_update)
 
+# When is navigation lost (Status.nav_lost)? A filter fed by its images uses most of them, and
+# its normalised innovations squared, NIS = nu^T S^-1 nu, follow a chi-square law with m
+# degrees of freedom (m = 2 LOS angles). Navigation is lost when
+# * more than NAV_LOST_UNUSED of the images gave no update (rejected: nothing found, or the
+#   window left the ROI), or
+# * more than NAV_LOST_OUTSIDE of the used images had an innovation beyond the chi-square
+#   99.9 % bound (NIS_BOUND_2DOF = -2 ln 0.001 = 13.8 for 2 degrees of freedom): a consistent
+#   filter has 0.1 % of its images there, one that has lost the target has most of them.
+# The two fractions are "most": half.
+NAV_LOST_UNUSED = 0.5
+NAV_LOST_OUTSIDE = 0.5
+NIS_BOUND_2DOF = 13.815510557964274  # chi2.ppf(0.999, 2) = -2 ln(1e-3)
+
+
+def normalised_innovation_squared(innovation, s) -> Float[Array, ""]:
+    """NIS = nu^T S^-1 nu of a 2-vector innovation with its 2x2 covariance, closed form."""
+    det = s[0, 0] * s[1, 1] - s[0, 1] * s[1, 0]
+    a, b = innovation[0], innovation[1]
+    q = s[1, 1] * a * a - (s[0, 1] + s[1, 0]) * a * b + s[0, 0] * b * b
+    return q / jnp.maximum(det, 1e-300)
+
+
+def navigation_lost(n_images, images_used, innovations_outside):
+    """``Status.nav_lost`` condition (see NAV_LOST_* above)."""
+    unused = n_images - images_used
+    return (unused > NAV_LOST_UNUSED * n_images) | (
+        innovations_outside > NAV_LOST_OUTSIDE * images_used
+    )
+
 
 class NavEstimate(NamedTuple):
     x: State6  # (r m, v m/s)

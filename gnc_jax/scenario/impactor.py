@@ -143,6 +143,14 @@ SCHEMA = {
             "int", 24, lo=1, hi=10000, doc="sweeps of the connected-component labelling"
         ),
         "max_bin_log2": F("int", 7, lo=0, hi=12, doc="largest binning is 2^max_bin_log2"),
+        "max_exposure_gain": F(
+            "float",
+            1e4,
+            lo=1.0,
+            hi=1e8,
+            doc="auto-exposure on the brightest pixel: longest exposure over the resolved-disc "
+            "exposure (1 = the resolved-disc exposure always; point-like targets need more)",
+        ),
     },
     "target": {
         "semi_axes_km": F(

@@ -583,6 +583,9 @@ def _nominal(cfg: dict):
     return EarthModel(), vehicle, atmosphere, entry
 
 
+nominal_models = _nominal  # public name: the envelope's open-loop flights use the same models
+
+
 def _target(cfg: dict, earth, entry) -> Vector3:
     """The target (unit vector, Earth-fixed): ``entry.range_km`` along the entry azimuth."""
     y0 = entry_state_from_conditions(entry, earth)

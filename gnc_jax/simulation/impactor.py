@@ -30,11 +30,15 @@ from ..dynamics.impactor import (
 )
 from ..geometry.bplane import b_plane_frame, check_b_plane_frame
 from ..geometry.ellipse import b_plane_position_covariance, mean_position_error
+from ..geometry.silhouette import focusing_factor, silhouette_matrix, silhouette_ratio
 from ..guidance.base import AbstractImpactorGuidance, ImpactorGuidanceContext
 from ..navigation.camera import camera_attitude, small_rotation
 from ..navigation.ekf import (
+    NIS_BOUND_2DOF,
     NavEstimate,
     ekf_update,
+    navigation_lost,
+    normalised_innovation_squared,
     predict_los,
     propagate_covariance,
 )
@@ -231,6 +235,9 @@ class ImpactorOutcome(NamedTuple):
     accel_bias_mps2: Vector3
     los_error_rms_urad: Scalar  # per-axis RMS of (measured - true) LOS angles over used images
     images_rejected: Array  # int, images without a valid centroid (no filter update)
+    # B-plane impact point in units of the target's silhouette (< 1: a hit, geometry.silhouette)
+    silhouette_ratio: Scalar
+    innovations_outside: Array  # int, used images whose innovation was beyond the chi2 99.9 %
 
 
 class StepRecord(NamedTuple):
@@ -275,6 +282,7 @@ class _Carry(NamedTuple):
     burn_time_image_s: Scalar  # burn time since the last image (covariance growth)
     los_error_sq: Scalar  # sum of squared LOS measurement errors (rad^2) over used images
     images_used: Array  # int
+    innovations_outside: Array  # int, used images with NIS > NIS_BOUND_2DOF
 
     @property
     def nav(self) -> NavEstimate:
@@ -374,8 +382,9 @@ def initial_conditions(sim: ImpactorSimulation, key: PRNGKeyArray):
 
 def take_image(
     sim: ImpactorSimulation, nav: NavEstimate, r_true: Vector3, attitude_bias_rad, w, key
-) -> tuple[NavEstimate, Measurement]:
-    """One image and its EKF update (seed 002 §3.2): the updated estimate and the measurement.
+) -> tuple[NavEstimate, Measurement, Scalar]:
+    """One image and its EKF update (seed 002 §3.2): the updated estimate, the measurement and
+    its normalised innovation squared (NIS, against the innovation covariance).
 
     The camera is pointed at the estimated target direction with attitude-control error; the
     filter interprets the image through its attitude estimate (bias + random error), with the
@@ -392,8 +401,8 @@ def take_image(
     predicted = predict_los(nav, c_est, sigma**2 * jnp.eye(2))
     exposure = Exposure(-r_true, c_true, c_est)
     meas = sim.measurement(exposure, nav, predicted, w[:2], key)
-    nav, _ = ekf_update(nav, meas.z, predicted, meas.valid)
-    return nav, meas
+    nav, innovation = ekf_update(nav, meas.z, predicted, meas.valid)
+    return nav, meas, normalised_innovation_squared(innovation, predicted.s)
 
 
 def _accel_noise(sigma_dv, moments, u):
@@ -503,10 +512,11 @@ def _image_step(sim: ImpactorSimulation, law, key, draws, spares, record, carry:
     k_frame = jax.random.fold_in(k_img, 1)
 
     def image_and_plan(nav, r_true, law_state, w):
-        nav, meas = take_image(sim, nav, r_true, bias, w[:8], k_frame)
-        return nav, meas, law.plan(law_state, nav, t, ctx)
+        nav, meas, nis = take_image(sim, nav, r_true, bias, w[:8], k_frame)
+        return nav, meas, nis, law.plan(law_state, nav, t, ctx)
 
-    nav, meas, law_state = image_and_plan(carry.nav, carry.truth.r, carry.law_state, w)
+    nav, meas, nis, law_state = image_and_plan(carry.nav, carry.truth.r, carry.law_state, w)
+    outside = (meas.valid & (nis > NIS_BOUND_2DOF)).astype(carry.innovations_outside.dtype)
     los_error_sq = jnp.where(meas.valid, jnp.sum((meas.z - meas.z_true) ** 2), 0.0)
     z = jnp.zeros(())
     spare = spares[carry.spares_used % N_SPARES]
@@ -521,6 +531,7 @@ def _image_step(sim: ImpactorSimulation, law, key, draws, spares, record, carry:
         burn_time_image_s=z,
         los_error_sq=carry.los_error_sq + los_error_sq,
         images_used=carry.images_used + meas.valid.astype(carry.images_used.dtype),
+        innovations_outside=carry.innovations_outside + outside,
     )
     k = jnp.arange(n)
     inputs = (t + dt * k, dt * (n - k - 0.5))
@@ -578,7 +589,25 @@ def _outcome(sim: ImpactorSimulation, carry: _Carry, draws) -> ImpactorOutcome:
         los_error_rms_urad=1e6
         * jnp.sqrt(carry.los_error_sq / jnp.maximum(2 * carry.images_used, 1)),
         images_rejected=(sim.n_images - carry.images_used).astype(jnp.int32),
+        silhouette_ratio=silhouette_ratio(b, _silhouette(sim), _focusing(sim)),
+        innovations_outside=carry.innovations_outside,
     )
+
+
+def _silhouette(sim: ImpactorSimulation):
+    """The target's shadow along S in the B-plane (m^2, :mod:`gnc_jax.geometry.silhouette`)."""
+    return silhouette_matrix(sim.target.semi_axes_m, sim.target.c_bi, sim.context.c_bi)
+
+
+def _focusing(sim: ImpactorSimulation):
+    speed = jnp.linalg.norm(sim.v0_mps)
+    return focusing_factor(sim.dynamics.mu_target, sim.target.mean_radius_m, speed)
+
+
+def capture_silhouette(sim: ImpactorSimulation) -> Float[Array, "2 2"]:
+    """The B-plane ellipse (shape matrix, m^2) whose inside is a hit: the silhouette widened
+    by gravitational focusing."""
+    return _silhouette(sim) * _focusing(sim) ** 2
 
 
 def simulate(
@@ -625,11 +654,14 @@ def simulate(
         burn_time_image_s=z,
         los_error_sq=z,
         images_used=jnp.zeros((), jnp.int32),
+        innovations_outside=jnp.zeros((), jnp.int32),
     )
     image_step = functools.partial(_image_step, sim, law, key, draws, spares, record)
     carry, rec = jax.lax.scan(image_step, carry0, jnp.arange(sim.n_images))
     outcome = _outcome(sim, carry, draws)
-    failures = ((outcome.fuel_kg > sim.propellant_kg, Status.propellant),)
+    # A run whose navigation was lost ends nav_lost, ahead of what it then does to its fuel.
+    lost = navigation_lost(sim.n_images, carry.images_used, carry.innovations_outside)
+    failures = ((lost, Status.nav_lost), (outcome.fuel_kg > sim.propellant_kg, Status.propellant))
     return with_status(outcome, failures), flatten_trace(rec)
 
 

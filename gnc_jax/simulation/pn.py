@@ -44,6 +44,7 @@ from ..dynamics.intercept import (
 )
 from ..geometry.bplane import b_plane_frame
 from ..geometry.kepler import OrbitalElements, elements_to_state
+from ..geometry.silhouette import focusing_factor
 from ..guidance.apn import (
     AugmentedPNGuidance,
     PNGuidanceContext,
@@ -147,6 +148,9 @@ class PNOutcome(NamedTuple):
     nav_position_error_m: Scalar  # |r_hat - r| at the end of guidance
     knowledge_position_error_m: Vector3  # along LOS, across in-plane, out of plane
     knowledge_velocity_error_mps: Vector3  # same axes
+    # B-plane miss over the capture radius of the spherical target (< 1: a hit, see
+    # gnc_jax.geometry.silhouette)
+    silhouette_ratio: Scalar
 
 
 class PNRecord(NamedTuple):
@@ -471,6 +475,13 @@ def simulate(
         nav_position_error_m=jnp.linalg.norm(nav_r - truth.r),
         knowledge_position_error_m=know_pos,
         knowledge_velocity_error_mps=know_vel,
+        silhouette_ratio=safe_norm(b)
+        / (
+            sim.dynamics.target_radius_m
+            * focusing_factor(
+                sim.dynamics.mu_target, sim.dynamics.target_radius_m, safe_norm(sim.y0.v)
+            )
+        ),
     )
     # ``not (t_rest > 0)`` rather than ``t_rest <= 0``: a NaN coast time is a time-out too.
     outcome = with_status(outcome, [(~(t_rest > 0.0), Status.time_out)])

@@ -61,6 +61,8 @@ class AbstractSystem(abc.ABC):
             cache, or whose lock-step loops wait longer for the slowest run, is slower per
             run; too small a batch pays the per-operation overhead); ``None``: 1024 runs per
             call.
+        envelope_metrics: ``{summary key: label}`` mapped by ``gnc-jax envelope`` (one heat map
+            each; ``failed_fraction`` is the fraction of failed runs).
         batch_tolerance: ``(rtol, atol)`` to which a vmapped batch reproduces the per-run
             program on float outcomes (integer outcomes must be equal): both compute the same
             run, but XLA compiles the two programs separately and may round differently.
@@ -80,6 +82,7 @@ class AbstractSystem(abc.ABC):
     test_overrides: ClassVar[dict[str, Any]] = {}
     step_seconds: ClassVar[float] = 1e-6
     chunk_per_device: ClassVar[int | None] = None
+    envelope_metrics: ClassVar[dict[str, str]] = {"failed_fraction": "failed fraction"}
 
     # ---- cost ----
     def steps_per_run(self, config: dict) -> float | None:
@@ -147,6 +150,27 @@ class AbstractSystem(abc.ABC):
 
     def check(self, config: dict) -> None:
         """Cross-field checks of a validated configuration (raise :class:`ScenarioError`)."""
+        return None
+
+    def warnings(self, config: dict) -> list[str]:
+        """One-line warnings about a valid but doubtful configuration: the law's (its
+        ``warnings``); printed by the CLI before a study and kept in ``summary.json``."""
+        laws = self.laws()
+        if not laws:
+            return []
+        law = laws[config["guidance"]["law"]]
+        return list(law.warnings(config["guidance"][law.law_name], config))
+
+    # ---- envelope (gnc_jax.operating_envelope) ----
+    def envelope_check(self, configs: list[dict], **options) -> list[dict]:
+        """Pre-check of the cells of an envelope, before anything is simulated: for each
+        validated configuration ``{"feasible": bool, "reason": str, "columns": {...}}``
+        (``columns``: extra columns of the cells table). Default: every cell feasible."""
+        return [{"feasible": True} for _ in configs]
+
+    def envelope_overlay(self, ax, envelope, x_key: str, y_key: str | None) -> None:
+        """Draw what the system knows of the envelope's axes (e.g. physical limits) on a heat
+        map ``ax`` whose axes are the grid fields ``x_key`` and ``y_key``. Default: nothing."""
         return None
 
     # ---- simulation ----

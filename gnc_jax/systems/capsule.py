@@ -13,7 +13,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._status import Status
-from ..guidance.entry_common import AbstractEntryGuidance
+from ..guidance.corridor import EntryEnvelope
+from ..guidance.entry_common import AbstractEntryGuidance, EntryModel
 from ..montecarlo import simulate_traces
 from ..plotting import ellipse_xy, pyplot, saver
 from ..scenario import capsule as capsule_scenario
@@ -65,6 +66,13 @@ def _capsule_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, A
             f"{name}_outside_2p5_km": int(np.sum(np.abs(o[name][ok]) > 2.5))
             for name in ("downrange_err_km", "crossrange_err_km")
         },
+        # the chute-deploy 3-sigma error: the larger end of the downrange and crossrange
+        # mean +- 3 std intervals (what "within +-5 km" bounds)
+        "chute_3sigma_km": max(
+            abs(x)
+            for name in ("downrange_err_km", "crossrange_err_km")
+            for x in _interval(o[name][ok])["three_sigma"]
+        ),
         "load_peak_g_max": float(np.max(o["load_peak_g"][ok])),
         "load_peak_g_mean": float(np.mean(o["load_peak_g"][ok])),
         "heat_rate_peak_kw_m2_max": float(np.max(o["heat_rate_peak_kw_m2"][ok])),
@@ -214,6 +222,15 @@ def capsule_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib.
     return files
 
 
+def entry_envelope(config: dict, load_limit_g: float) -> EntryEnvelope:
+    """The entry corridor and footprint (:class:`~gnc_jax.guidance.corridor.EntryEnvelope`)
+    of a validated capsule configuration's nominal vehicle, atmosphere and entry."""
+    earth, vehicle, atmosphere, entry = capsule_sim.nominal_models(config)
+    model = EntryModel(vehicle, earth, atmosphere)
+    chute = config["entry"]["chute_altitude_km"] * 1e3
+    return EntryEnvelope(model, entry, chute, config["simulation"]["max_time_s"], load_limit_g)
+
+
 @register_system
 class CapsuleSystem(AbstractSystem):
     name = "capsule"
@@ -241,6 +258,14 @@ class CapsuleSystem(AbstractSystem):
     }
     example = "lunar-skip-entry"
     test_overrides: ClassVar[dict[str, Any]] = {}
+    envelope_metrics: ClassVar[dict[str, str]] = {
+        "chute_3sigma_km": "chute-deploy 3σ error (km, larger of downrange and crossrange)",
+        "failed_fraction": "failed fraction",
+        "load_peak_g_max": "peak load, largest (g)",
+    }
+    LOAD_LIMIT_G: ClassVar[float] = 10.0
+    """Default load limit of the corridor's undershoot boundary (Apollo's lunar-return design
+    limit; seed 003 gives none). ``gnc-jax envelope --load-limit-g`` changes it."""
 
     # measured with benchmarks/capsule_cost.py (wall s x devices / runs / steps)
     step_seconds = STEP_SECONDS
@@ -279,6 +304,89 @@ class CapsuleSystem(AbstractSystem):
         slots = 1 + law.get("n_bracket", 6) + law.get("n_iter", 6)
         cycles = FIRST_ENTRY_FRACTION * flight_s / g["pc_period_s"]
         return float(truth + cycles * min(PREDICTIONS_PER_CYCLE, slots) * horizon)
+
+    def envelope_check(self, configs, load_limit_g=None, **options):
+        """Entry corridor pre-check (:mod:`gnc_jax.guidance.corridor`): a cell whose entry
+        flight-path angle skips out even with full lift down (overshoot) or exceeds the load
+        limit even with full lift up (undershoot) is infeasible. Columns: the corridor's ends
+        and the reachable footprint (constant-bank extreme chute ranges) at the cell's angle,
+        and whether the target lies inside it."""
+        limit = self.LOAD_LIMIT_G if load_limit_g is None else float(load_limit_g)
+        field = capsule_scenario.SCHEMA["entry"]["fpa_deg"]
+        out, corridors = [], {}
+        for cfg in configs:
+            env = entry_envelope(cfg, limit)
+            fpa = cfg["entry"]["fpa_deg"]
+            # the corridor depends on everything but the angle and the target's range
+            key = repr({k: v for k, v in cfg.items() if k != "entry"}) + repr(
+                {k: v for k, v in cfg["entry"].items() if k not in ("fpa_deg", "range_km")}
+            )
+            if key not in corridors:
+                corridors[key] = env.corridor(field.lo, field.hi, 0.05)
+            cor = corridors[key]
+            lo, hi = env.footprint(fpa)
+            rng = cfg["entry"]["range_km"]
+            feasible = cor.contains(fpa)
+            if not feasible and not cor.undershoot_deg <= cor.overshoot_deg:
+                reason = (
+                    f"no entry angle in [{field.lo:g}, {field.hi:g}] deg is both captured with "
+                    f"full lift down and within {limit:g} g with full lift up at this speed and "
+                    "vehicle"
+                )
+            elif not feasible:
+                side = (
+                    "overshoot (skips out with full lift down)"
+                    if fpa > cor.overshoot_deg
+                    else (f"undershoot (above {limit:g} g with full lift up)")
+                )
+                reason = (
+                    f"outside the entry corridor {cor.undershoot_deg:.2f} .. "
+                    f"{cor.overshoot_deg:.2f} deg: {side}"
+                )
+            else:
+                reason = ""
+            out.append(
+                dict(
+                    feasible=feasible,
+                    reason=reason,
+                    columns=dict(
+                        corridor_undershoot_deg=cor.undershoot_deg,
+                        corridor_overshoot_deg=cor.overshoot_deg,
+                        load_limit_g=limit,
+                        footprint_min_km=lo,
+                        footprint_max_km=hi,
+                        in_footprint=bool(lo <= rng <= hi),
+                    ),
+                )
+            )
+        return out
+
+    def envelope_overlay(self, ax, envelope, x_key, y_key):
+        """The entry corridor (lines at its ends) when an axis is ``entry.fpa_deg``, and the
+        reachable footprint (shortest and longest constant-bank chute range against the
+        angle) when the other is ``entry.range_km``."""
+        cells = envelope.cells
+        if "entry.fpa_deg" not in (x_key, y_key) or not cells:
+            return
+        vertical = x_key == "entry.fpa_deg"
+        line = ax.axvline if vertical else ax.axhline
+        c0 = cells[0]
+        for name, style in (("corridor_overshoot_deg", "--"), ("corridor_undershoot_deg", ":")):
+            v = c0.get(name)
+            if v is not None and np.isfinite(v):
+                line(v, color="r", ls=style, lw=1.5, label=name.replace("_", " "))
+        other = y_key if vertical else x_key
+        if other != "entry.range_km":
+            return
+        fpas = np.asarray(envelope.axes["entry.fpa_deg"], float)
+        dense = np.linspace(fpas.min(), fpas.max(), 25)
+        limit = c0.get("load_limit_g", self.LOAD_LIMIT_G)
+        fp = entry_envelope(envelope.scenario.config, limit).footprints(dense)
+        lim = ax.get_ylim() if vertical else ax.get_xlim()
+        for k, name in ((0, "footprint: shortest range"), (1, "footprint: longest range")):
+            xy = (dense, fp[:, k]) if vertical else (fp[:, k], dense)
+            ax.plot(*xy, "m-" if k else "m--", lw=2, label=name)
+        (ax.set_ylim if vertical else ax.set_xlim)(lim)
 
     def build(self, scenario):
         sim = capsule_sim.build(scenario)

@@ -27,6 +27,7 @@ from ..navigation.render import choose_binning, phase_offset_tangent, render_fra
 from ..plotting import ellipse_xy, pyplot, saver
 from ..scenario import impactor as impactor_scenario
 from ..simulation import impactor as impactor_sim
+from ..statistics import wilson_interval
 from .base import AbstractSystem, register_system
 
 
@@ -55,14 +56,43 @@ def impact_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any
     )
 
 
+HIT_RULE = (
+    "hit: the B-plane impact point inside the target's silhouette along S (the shadow of the "
+    "target as the scenario defines it: the [target] ellipsoid, or the sphere of "
+    "dynamics.target_radius_m of an intercept), widened by gravitational focusing; ok runs, "
+    "95 % Wilson interval"
+)
+
+
+def hit_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
+    """Probability of hitting the body (:mod:`gnc_jax.geometry.silhouette`) over the ``ok``
+    runs, with its 95 % Wilson score interval (:func:`gnc_jax.statistics.wilson_interval`)."""
+    n = int(np.sum(ok))
+    if n == 0:
+        return {}
+    hits = int(np.sum(o["silhouette_ratio"][ok] < 1.0))
+    lo, hi = wilson_interval(hits, n)
+    return dict(
+        hits=hits,
+        hit_probability=hits / n,
+        hit_probability_ci95=[lo, hi],
+        hit_rule=HIT_RULE,
+    )
+
+
 def _impactor_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
-    """The impactor statistics plus those of the seed 000/002 navigation front ends."""
+    """The impactor statistics (miss, hit probability) plus those of the seed 000/002
+    navigation front ends."""
     out = impact_statistics(o, ok)
     if out:
+        out.update(hit_statistics(o, ok))
         out.update(
             los_error_rms_urad_mean=float(np.mean(o["los_error_rms_urad"][ok])),
             images_rejected_max=int(np.max(o["images_rejected"][ok])),
             images_rejected_mean=float(np.mean(o["images_rejected"][ok])),
+            innovations_outside_mean=float(np.mean(o["innovations_outside"][ok])),
+            innovations_outside_max=int(np.max(o["innovations_outside"][ok])),
+            nav_lost=int(np.sum(o["status"] == Status.nav_lost)),
         )
     return out
 
@@ -82,13 +112,19 @@ def _b_plane_points(plt, summary, runs, ok, scenario):
             xy = ellipse_xy(mean, cov, k)
             p = float(ellipse_probability(k))
             ax.plot(xy[0], xy[1], "k" + style, lw=1, label=f"{k}σ ellipse (P = {p:.3f})")
+    sim = impactor_sim.build(scenario)
+    shadow = np.asarray(impactor_sim.capture_silhouette(sim))
+    xy = ellipse_xy(-aim, shadow, 1)
+    ax.plot(xy[0], xy[1], "C2-", lw=1.5, label="target silhouette (hit inside)")
     ax.set_xlabel("B·T − aim (m)")
     ax.set_ylabel("B·R − aim (m)")
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_title(
         f"{scenario.name}: B-plane impact points\n"
         f"miss RMS {summary.get('miss_rms_m', np.nan):.1f} m, "
-        f"max {summary.get('miss_max_m', np.nan):.1f} m"
+        f"max {summary.get('miss_max_m', np.nan):.1f} m; "
+        f"P(hit) {summary.get('hit_probability', np.nan):.3f} "
+        "[{:.3f}, {:.3f}] (95 %)".format(*summary.get("hit_probability_ci95", [np.nan] * 2))
     )
     ax.legend(loc="upper right", fontsize=8)
     ax.grid(alpha=0.3)
@@ -233,10 +269,23 @@ class ImpactorSystem(AbstractSystem):
     parameter_modules = (impactor_sim.ImpactorErrors,)
     law_family = AbstractImpactorGuidance
     default_law = "los"
-    metrics = ("miss_rms_m", "miss_max_m", "dv_mean_mps", "dv_max_mps", "firings_mean")
+    metrics = (
+        "miss_rms_m",
+        "miss_max_m",
+        "dv_mean_mps",
+        "dv_max_mps",
+        "firings_mean",
+        "hit_probability",
+    )
     paper_labels: ClassVar[dict[str, str]] = {
         **IMPACT_LABELS,
         "los_error_rms_urad_mean": "LOS meas. error RMS (µrad)",
+    }
+    envelope_metrics: ClassVar[dict[str, str]] = {
+        "hit_probability": "hit probability",
+        "dv_mean_mps": "Δv mean (m/s)",
+        "miss_rms_m": "miss RMS (m)",
+        "failed_fraction": "failed fraction",
     }
     example = "deep-impact-los"
     # a 15-minute approach: the whole chain (images, EKF, both laws, retarget, cut-off) in a

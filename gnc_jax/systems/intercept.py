@@ -19,7 +19,7 @@ from ..plotting import ellipse_xy, pyplot, saver
 from ..scenario import pn as intercept_scenario
 from ..simulation import pn as intercept_sim
 from .base import AbstractSystem, register_system
-from .impactor import IMPACT_LABELS, impact_objective, impact_statistics
+from .impactor import IMPACT_LABELS, hit_statistics, impact_objective, impact_statistics
 
 
 def _intercept_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
@@ -27,6 +27,7 @@ def _intercept_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str,
     if not ok.any():
         return {}
     out = impact_statistics(o, ok)
+    out.update(hit_statistics(o, ok))
     miss = o["miss_m"][ok]
     out.update(
         miss_std_m=float(np.std(miss)),

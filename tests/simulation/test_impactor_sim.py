@@ -62,3 +62,24 @@ def test_paper_scale_deep_impact(paper_scale):
     assert 3.0 <= los["dv_mean_mps"] <= 10.0
     assert los["firings_max"] <= 10
     assert pred["miss_rms_m"] > los["miss_rms_m"]
+
+
+def test_hit_probability_counts_impacts_inside_the_target():
+    """Issue 15 item 5: a hit is an impact point inside the target's disc (a sphere here;
+    no target gravity), counted against the B-plane points directly, with scipy's Wilson
+    interval."""
+    from scipy import stats
+
+    radius_km = 3.2  # the (1, 3) km aim point sits 3.16 km from the centre: both outcomes occur
+    sc = gj.load_scenario(
+        "deep-impact-los", overrides=SHORT + [f"target.semi_axes_km=[{radius_km}, 3.2, 3.2]"]
+    )
+    # 20 runs on every device: the compiled program of test_the_law_corrects_the_delivery_error
+    study = gj.run_study(sc, runs=20, seed=3, progress=False)
+    s = study.summary()
+    o = study.outcomes
+    hits = int(np.sum(np.hypot(o["b_t_m"], o["b_r_m"]) < radius_km * 1e3))
+    assert 0 < hits < 20 and s["failed"] == 0
+    assert s["hits"] == hits and s["hit_probability"] == hits / 20
+    ci = stats.binomtest(hits, 20).proportion_ci(method="wilson")
+    np.testing.assert_allclose(s["hit_probability_ci95"], [ci.low, ci.high], atol=1e-12)

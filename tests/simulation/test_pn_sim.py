@@ -137,3 +137,15 @@ def test_packed_filter_and_draw_blocks_keep_the_per_run_statistics(image_interva
     # across the LOS the estimate converged (range itself is unobservable from angles alone)
     know = np.linalg.norm(np.asarray(five.knowledge_position_error_m), axis=1)
     assert np.all(np.asarray(five.nav_position_error_m) < know + 1e3)
+
+
+def test_intercept_hit_probability_is_the_miss_against_the_target_radius():
+    """Issue 15 item 5 for the intercept: a hit is a B-plane miss inside Bennu's radius."""
+    import gnc_jax as gj
+
+    sc = gj.load_scenario("bennu-apn-ideal")
+    study = gj.run_study(sc, runs=1, progress=False)
+    radius = sc.config["dynamics"]["target_radius_m"]
+    o, s = study.outcomes, study.summary()
+    np.testing.assert_allclose(o["silhouette_ratio"], o["miss_m"] / radius, rtol=1e-6)
+    assert s["hits"] == int(np.sum(o["miss_m"] < radius)) == 1 and s["hit_probability"] == 1.0

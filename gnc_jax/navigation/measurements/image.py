@@ -111,6 +111,7 @@ def camera_model(cam: dict) -> CameraModel:
         samples=int(cam["samples"]),
         label_iterations=int(cam["label_iterations"]),
         max_bin_log2=int(cam["max_bin_log2"]),
+        max_exposure_gain=f(cam["max_exposure_gain"]),
     )
 
 

@@ -1,0 +1,32 @@
+"""Statistics of study outcomes shared by the systems: binomial proportions.
+
+The Wilson score interval (Wilson 1927) of a proportion k / n at confidence 1 - alpha:
+
+    centre = (p + z^2 / 2n) / (1 + z^2 / n),
+    half width = z / (1 + z^2 / n) sqrt(p (1 - p) / n + z^2 / 4n^2),
+
+with p = k / n and z the standard normal's 1 - alpha/2 quantile (1.959964 at 95 %). Unlike the
+normal (Wald) interval it stays inside [0, 1] and does not collapse to a point at k = 0 or
+k = n, which is where a hit probability lives.
+"""
+
+import math
+from statistics import NormalDist
+
+
+def wilson_interval(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
+    """Wilson score interval ``(lo, hi)`` of the proportion ``k / n`` (``n >= 1``)."""
+    if n < 1 or not 0 <= k <= n:
+        raise ValueError(f"wilson_interval: k = {k}, n = {n}; allowed: 0 <= k <= n, n >= 1")
+    z = NormalDist().inv_cdf(0.5 + 0.5 * confidence)
+    p = k / n
+    denom = 1.0 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z / denom * math.sqrt(p * (1.0 - p) / n + z * z / (4 * n * n))
+    # exact end points at k = 0 and k = n (the formula gives them up to rounding)
+    lo = 0.0 if k == 0 else max(centre - half, 0.0)
+    hi = 1.0 if k == n else min(centre + half, 1.0)
+    return lo, hi
+
+
+__all__ = ["wilson_interval"]

@@ -1,0 +1,122 @@
+"""Issue 15 item 2: ``gnc-jax envelope`` and its capsule pre-check."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from scipy.integrate import solve_ivp
+
+import gnc_jax as gj
+from gnc_jax import cli
+from gnc_jax import operating_envelope as envelope_module
+from gnc_jax.dynamics.entry import EntryState, entry_state_from_conditions
+from gnc_jax.guidance.corridor import DT_S, fly_constant_bank
+from gnc_jax.guidance.entry_common import flight_variables
+from gnc_jax.systems.capsule import entry_envelope
+from gnc_jax.systems.impactor import ImpactorSystem
+
+
+def test_grid_specs_parse_and_bad_ones_name_the_axis():
+    assert envelope_module.parse_grid("entry.fpa_deg=-6:-5:3") == (
+        "entry.fpa_deg",
+        [-6.0, -5.5, -5.0],
+    )
+    assert envelope_module.parse_grid("entry.range_km=2500,5000") == (
+        "entry.range_km",
+        [2500.0, 5000.0],
+    )
+    for bad in ("entry.fpa_deg=-6:-5", "entry.fpa_deg=-6:-5:0", "fpa=1:2:3", "entry.fpa_deg"):
+        with pytest.raises(gj.ScenarioError, match="--grid"):
+            envelope_module.parse_grid(bad)
+
+
+def test_a_grid_value_outside_the_field_range_is_refused_before_any_study(capsys, monkeypatch):
+    monkeypatch.setattr(envelope_module, "run_study", lambda *a, **k: pytest.fail("ran"))
+    argv = ["envelope", "lunar-skip-entry", "--grid", "entry.fpa_deg=-20:-5:3", "--out", "/tmp/x"]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("gnc-jax: error: entry.fpa_deg: -20")
+
+
+def test_cells_are_the_studies_of_their_scenarios(tmp_path):
+    """Each cell's metrics are those of run_study on the scenario with the cell's values."""
+    sc = gj.load_scenario("deep-impact-los", ImpactorSystem.test_overrides)
+    env = gj.envelope(sc, ["guidance.los.k1=3:5:2"], runs=4, seed=2, out=tmp_path, progress=False)
+    table = pq.read_table(tmp_path / "cells.parquet").to_pydict()
+    assert table["guidance.los.k1"] == [3.0, 5.0]
+    s = gj.run_study(sc.with_overrides({"guidance.los.k1": 5.0}), runs=4, seed=2).summary()
+    assert table["miss_rms_m"][1] == pytest.approx(s["miss_rms_m"], rel=1e-12)
+    assert table["dv_mean_mps"][1] == pytest.approx(s["dv_mean_mps"], rel=1e-12)
+    assert table["miss_rms_m"][0] != table["miss_rms_m"][1]  # the cells differ by their k1
+    assert {p.name for p in tmp_path.iterdir()} >= {
+        "cells.parquet",
+        "envelope_hit_probability.png",
+        "envelope_dv_mean_mps.png",
+    }
+    assert all(c["status"] == "simulated" for c in env.cells)
+
+
+SHORT_CAPSULE = ["simulation.max_time_s=2000.0"]
+
+
+def test_constant_bank_flight_matches_scipy():
+    """The open-loop flight against scipy's DOP853 on the same vertical-plane field: chute
+    range within 2 km (the 2 s RK4 step and the crossing taken at the step's end) and peak
+    load within 1 %."""
+    sc = gj.load_scenario("lunar-skip-entry", overrides=SHORT_CAPSULE)
+    env = entry_envelope(sc.config, 10.0)
+    bank = np.radians(100.0)
+    f = fly_constant_bank(env.model, env.entry, bank, env.chute_m, env.steps)
+    earth = env.model.earth
+    y0 = entry_state_from_conditions(env.entry, earth)
+
+    @jax.jit
+    def field(x):
+        d = env.model.vertical_plane_field(0.0, EntryState(x[:3], x[3:]), np.cos(bank))
+        alt = flight_variables(EntryState(x[:3], x[3:]), earth).altitude_m
+        return jnp.concatenate([d.r, d.v]), alt, env.model.load_g(EntryState(x[:3], x[3:]))
+
+    def rhs(t, x):
+        return np.asarray(field(x)[0])
+
+    def chute(t, x):
+        return float(field(x)[1]) - env.chute_m
+
+    chute.terminal, chute.direction = True, -1
+    x0 = np.concatenate([np.asarray(y0.r), np.asarray(y0.v)])
+    sol = solve_ivp(
+        rhs,
+        (0, env.steps * DT_S),
+        x0,
+        "DOP853",
+        rtol=1e-8,
+        atol=1e-3,
+        events=chute,
+        dense_output=True,
+    )
+    assert bool(f.landed) and sol.t_events[0].size == 1
+    t_c = sol.t_events[0][0]
+    from gnc_jax.guidance.entry_common import ground_range_m
+
+    ref_range = float(ground_range_m(y0.r, 0.0, sol.y_events[0][0][:3], t_c, earth))
+    assert abs(float(f.range_m) - ref_range) < 2e3
+    ts = np.linspace(0, t_c, 3000)
+    loads = [float(field(x)[2]) for x in sol.sol(ts).T]
+    assert float(f.peak_load_g) == pytest.approx(max(loads), rel=0.01)
+
+
+def test_cells_outside_the_corridor_are_not_simulated(monkeypatch):
+    """A shallow angle that skips out with full lift down and a steep one beyond the load
+    limit with full lift up are infeasible before anything runs; the pre-check's verdict is
+    the open-loop flights' own at those angles."""
+    monkeypatch.setattr(envelope_module, "run_study", lambda *a, **k: pytest.fail("ran"))
+    sc = gj.load_scenario("lunar-skip-entry", overrides=SHORT_CAPSULE)
+    env = gj.envelope(sc, {"entry.fpa_deg": [-9.0, -4.5]}, runs=2, progress=False)
+    assert [c["status"] for c in env.cells] == ["infeasible", "infeasible"]
+    assert "undershoot" in env.cells[0]["reason"] and "overshoot" in env.cells[1]["reason"]
+    lo, hi = env.cells[0]["corridor_undershoot_deg"], env.cells[0]["corridor_overshoot_deg"]
+    assert -9.0 < lo < hi < -4.5
+    flights = entry_envelope(sc.config, 10.0).flights([lo, hi, hi + 0.05], [180.0, 0.0])
+    assert flights.peak_load_g[0, 1] <= 10.0 and flights.landed[1, 0]
+    assert not flights.landed[2, 0]
