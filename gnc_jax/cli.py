@@ -240,9 +240,30 @@ def cmd_envelope(args) -> int:
     _writable_dir(args.out)
     _print_warnings(scenario)
     options = {} if args.load_limit_g is None else {"load_limit_g": args.load_limit_g}
-    env = envelope(
-        scenario, args.grid, runs=args.runs, seed=args.seed, out=args.out, progress=True, **options
-    )
+    client = None
+    if args.scheduler:
+        client = _connect(args.scheduler)
+    elif args.workers:
+        from .montecarlo import local_cluster
+
+        client = local_cluster(args.workers)
+    try:
+        env = envelope(
+            scenario,
+            args.grid,
+            runs=args.runs,
+            seed=args.seed,
+            out=args.out,
+            progress=True,
+            client=client,
+            **options,
+        )
+    finally:
+        if client is not None:
+            cluster = client.cluster if args.workers else None
+            client.close()
+            if cluster is not None:
+                cluster.close()
     print(f"wrote {args.out}/cells.parquet and {len(env.metrics)} heat maps")
     return 0
 
@@ -253,6 +274,22 @@ def cmd_report(args) -> int:
     for path in report(args.dir, args.out):
         print(f"wrote {path}")
     return 0
+
+
+def _where(q) -> None:
+    where = q.add_mutually_exclusive_group()
+    where.add_argument(
+        "--workers",
+        type=_positive_int("--workers"),
+        default=None,
+        help="run the chunks on a local Dask cluster of N worker processes",
+    )
+    where.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="tcp://HOST:PORT",
+        help="run the chunks on an existing Dask cluster",
+    )
 
 
 def _study_limits(q) -> None:
@@ -317,19 +354,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument(
         "--overwrite", action="store_true", help="replace a study already in --out as a whole"
     )
-    where = q.add_mutually_exclusive_group()
-    where.add_argument(
-        "--workers",
-        type=_positive_int("--workers"),
-        default=None,
-        help="run the chunks on a local Dask cluster of N worker processes",
-    )
-    where.add_argument(
-        "--scheduler",
-        default=None,
-        metavar="tcp://HOST:PORT",
-        help="run the chunks on an existing Dask cluster",
-    )
+    _where(q)
     _study_limits(q)
     q.set_defaults(func=cmd_run)
 
@@ -366,6 +391,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="capsule: the entry corridor's load limit (default 10 g)",
     )
+    _where(q)
     q.set_defaults(func=cmd_envelope)
 
     q = sub.add_parser("report", help="PNG figures of a study directory")

@@ -119,6 +119,7 @@ def envelope(
     seed: int | None = None,
     out=None,
     progress: bool = True,
+    client=None,
     **check_options,
 ) -> Envelope:
     """A grid of Monte Carlo studies of ``scenario`` (see the module docstring).
@@ -129,6 +130,8 @@ def envelope(
             grid values, not by their draws).
         out: directory for ``cells.parquet``, ``envelope.json`` and the PNGs (optional).
         progress: one line per cell on stderr.
+        client: a ``dask.distributed.Client``: each cell's chunks run on its workers (the path
+            of :func:`gnc_jax.run_study`; the cells one after another).
         check_options: passed to the system's pre-check (the capsule: ``load_limit_g``).
     """
     axes = dict(parse_grid(g) for g in grid) if not isinstance(grid, dict) else dict(grid)
@@ -156,7 +159,7 @@ def envelope(
             continue
         t0 = time.perf_counter()
         try:
-            study = run_study(cell, runs=runs, seed=seed, progress=False)
+            study = run_study(cell, runs=runs, seed=seed, progress=False, client=client)
         except ScenarioError as e:
             row.update(status=REFUSED, reason=str(e))
             _say(progress, f"{head} refused: {e}")

@@ -257,3 +257,14 @@ def test_a_chunk_that_raises_is_reported_and_the_rest_go_on(toy, reference, tmp_
     assert len(names) == RUNS // CHUNK - 1 and "chunk-000002.parquet" not in names
     monkeypatch.setattr(montecarlo, "run_chunk", run_chunk)
     _equal(run_study(toy, runs=RUNS, progress=False, out=out, resume=True).outcomes, reference)
+
+
+def test_envelope_cells_run_through_the_dask_path(toy):
+    distributed = pytest.importorskip("dask.distributed")
+    grid = ["guidance.pn.n=3:4:2"]
+    local = gj.envelope(toy, grid, runs=CHUNK, progress=False)
+    with distributed.Client(processes=False, n_workers=1, threads_per_worker=1) as client:
+        remote = gj.envelope(toy, grid, runs=CHUNK, progress=False, client=client)
+    drop = ("wall_s", "compile_s")
+    strip = lambda cells: [{k: v for k, v in c.items() if k not in drop} for c in cells]  # noqa: E731
+    assert strip(remote.cells) == strip(local.cells) and len(local.cells) == 2
