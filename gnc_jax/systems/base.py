@@ -140,6 +140,13 @@ class AbstractSystem(abc.ABC):
         ``check``)."""
         laws = self.laws()
         chosen = self.law_name(raw)
+        if laws and isinstance(raw.get("guidance"), dict) and "law" in raw["guidance"]:
+            if chosen not in laws:  # before its [guidance.<law>] table is called unknown
+                raise ScenarioError(
+                    f"{where}guidance.law: got {raw['guidance']['law']!r}; allowed: one of "
+                    + ", ".join(repr(n) for n in sorted(laws))
+                    + f" (a law of your own: import its module first, or name it in {PLUGINS_ENV})"
+                )
         optional = {f"guidance.{n}" for n in laws if n != chosen}
         config = validate(raw, self.schema(), where, optional)
         self.check(config)  # the system's domain first: the laws' checks may rely on it
