@@ -78,7 +78,19 @@ def _status() -> str:
     )
 
 
+def _benchmark_figures(docs: pathlib.Path) -> None:
+    """The figures ``python -m benchmarks`` wrote, copied beside the benchmarks page."""
+    import shutil
+
+    out = docs / "benchmark-figures"
+    out.mkdir(exist_ok=True)
+    for png in sorted((docs.parent / "benchmarks" / "figures").glob("*.png")):
+        if not (out / png.name).exists() or (out / png.name).read_bytes() != png.read_bytes():
+            shutil.copyfile(png, out / png.name)
+
+
 def on_pre_build(config, **kwargs):
+    _benchmark_figures(pathlib.Path(config["docs_dir"]))
     ref = pathlib.Path(config["docs_dir"]) / "reference"
     ref.mkdir(exist_ok=True)
     for name, make in zip(GENERATED, (_cli, _fields, _status)):
