@@ -199,7 +199,7 @@ def cmd_report(args) -> int:
 
 def cmd_tune(args) -> int:
     from .scenario import load_scenario
-    from .tune import progress_line, tune
+    from .tuning import progress_line, tune
 
     scenario = load_scenario(args.scenario, overrides=args.set or ())
     _writable_dir(args.out)

@@ -1,4 +1,4 @@
-"""Gradient-based tuning of guidance gains (issue 14): :func:`tune`, ``gnc-jax tune``.
+"""Gradient-based tuning of guidance gains (issue 14): ``gj.tune``, ``gnc-jax tune``.
 
 The gains to tune are chosen by their scenario names (``guidance.los.k1``, ``guidance.apn.n0``,
 ``guidance.skip_entry.k_range``, ...: :meth:`~gnc_jax.systems.AbstractSystem.tunable_names`).
@@ -21,19 +21,25 @@ k1 >= k2, trigger_on > trigger_off) is ``smaller = lo + exp(theta_s)``, ``larger
 exp(theta_l)``; upper bounds clip.
 
 **Forward mode, chosen by measurement.** The gradient is ``jax.jacfwd`` (one forward tangent
-per gain, vectorised) by default; ``gradient="reverse"`` is ``jax.grad``. Measured on the
-2-core machine (one device, ``benchmarks/tune_gradient.py``; full paper scenarios, 16 runs of
-deep-impact-los, 8 of bennu-apn), value / forward / reverse:
+per gain, vectorised) by default; ``gradient="reverse"`` is ``jax.grad``. Measured with
+``benchmarks/tune_gradient.py`` (one core of the shared 2-core machine, full paper scenarios,
+the relaxed objective; value / forward / reverse, compiled temp memory):
 
-* deep-impact-los, 2 gains (7200 s at 1 s steps): 0.11 s / 0.23 s / see TUNE_MODES below;
-* bennu-apn, 4 gains (91 800 guidance steps): see TUNE_MODES below.
+* deep-impact-los, 16 runs, 2 gains: 0.11 s / 0.23 s (2.1x) / 4.3 s (39x); temp memory
+  0 / 0.1 MB / 273 MB; compile 15 / 32 / 155 s;
+* bennu-apn, 8 runs, 4 gains: 0.81 s / 14.3 s (18x) / 15.1 s (19x); 0 / 0.1 MB / 2.8 GB;
+  compile 19 / 40 / 84 s (one gain, forward: 9.5 s against 1.14 s, 8x).
 
-Forward mode costs about (1 + gains/2) forward runs and no memory beyond a forward run, whatever
-the length of the closed loop; reverse mode keeps the residuals of every step of the outer scan
-(the simulators' scans are not checkpointed, and a ``jax.checkpoint`` of the whole run does not
-bound the scan's residuals), and the capsule's ``while_loop`` flight is not reverse-
-differentiable at all. With at most a handful of gains forward mode is both the faster and the
-bounded one.
+Reverse mode keeps the residuals of every step of the closed loop (17 MB per LOS run over
+7200 steps, 350 MB per intercept run over 91 800 steps with an EKF update each): 256 intercept
+runs would need 90 GB. A ``jax.checkpoint`` of the whole run does not bound the residuals of
+the scans inside it, and checkpointing the simulators' own scans would change every simulator;
+the capsule's flight (a ``while_loop``) is not reverse-differentiable at all. Forward mode needs
+no memory beyond the forward run whatever the loop's length, and with the few gains a law has
+it is also the faster (LOS: 19x faster than reverse; intercept: equal). Its cost per gain
+depends on the loop: 0.6 of a run per gain for the LOS law (the EKF runs once per 15 s image),
+but 4 to 7 runs per gain for the intercept, whose EKF update at every 1 s step differentiates
+its matrix algebra once per tangent.
 
 **Gradient-free baseline** (``method="es"``): an antithetic evolution strategy in the same
 ``theta`` with the same optimiser, evaluated with the hard logic; each generation flies

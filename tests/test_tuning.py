@@ -1,4 +1,4 @@
-"""Gain tuning (gnc_jax.tune, ``gnc-jax tune``), on the toy system of tests/toy_system.py.
+"""Gain tuning (gnc_jax.tuning, ``gnc-jax tune``), on the toy system of tests/toy_system.py.
 
 The toy double-integrator intercept compiles in about a second, so every check here runs the
 whole tuner (gradients, the optimiser, the evaluation, the files) at CI cost. Each compares
@@ -20,9 +20,9 @@ import pytest
 
 import gnc_jax as gj
 from gnc_jax import cli
-from gnc_jax import tune as tune_module
+from gnc_jax import tuning as tune_module
 from gnc_jax.scenario import ScenarioError
-from gnc_jax.tune import (
+from gnc_jax.tuning import (
     HELDOUT_OFFSET,
     Reparametrisation,
     heldout_indices,
