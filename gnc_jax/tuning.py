@@ -4,10 +4,18 @@ The gains to tune are chosen by their scenario names (``guidance.los.k1``, ``gui
 ``guidance.skip_entry.k_range``, ...: :meth:`~gnc_jax.systems.AbstractSystem.tunable_names`).
 An objective over a batch of dispersed runs is minimised with optax (Adam on a cosine-decayed
 step, gradient clipping) through the laws' smooth relaxations, whose temperature is annealed
-geometrically from 4x the scenario's own temperature down to it; the result is evaluated with
+geometrically from the scenario's own temperature T to T / 4; the result is evaluated with
 the hard logic (the normal simulate path) on held-out runs, paired: initial and tuned gains fly
 the same held-out runs, and the table gives a bootstrap confidence interval of the paired
 difference.
+
+**Why anneal down from T, not up.** A relaxation is only useful where it orders gains as the
+hard logic does. Measured on 256 deep-impact-los runs, miss RMS + 10 s x Δv mean, hard logic
+against the relaxed switch at T = 0.2 / 0.05 / 0.0125 / 0.003: (4, 1) 138.1 against 226.0 /
+125.4 / 134.5 / 137.1; (3, 1) 125.7 against 232.0 / 118.8 / 123.6 / 125.0; (5.54, 0.88) 158.8
+against 221.3 / 143.6 / 156.3 / 158.2. At 4 T the relaxed switch ranks (5.54, 0.88) best and
+(3, 1) worst, the reverse of the hard logic, and a tuning started there moved to gains 15 %
+worse on held-out runs; from T down the ordering is the hard one's.
 
 **Run indices.** Run ``i`` uses ``fold_in(key(seed), i)`` as in every study. Training step
 ``s`` flies runs ``(s * batch + j) mod train_runs`` (default ``train_runs = batch * steps``: a
@@ -675,6 +683,10 @@ class TuneResult:
             hard for es), ``gains``, ``temperature``, ``runs`` (simulated so far), ``wall_s``
             (after compilation, evaluations excluded), and ``heldout`` where evaluated.
         heldout: the paired held-out evaluation (:func:`evaluate_heldout`), or ``None``.
+        training_check: the hard objective on the first ``runs`` training runs of the start
+            (``initial``), the last step (``last``) and the result (``tuned``, at
+            ``selected_step``; -1: the start): a relaxation that misled the tuner shows there,
+            without looking at the held-out runs (``None`` when ``check_runs=0``).
         compile_s, wall_s: compilation and training wall time.
     """
 
@@ -692,6 +704,7 @@ class TuneResult:
     heldout: dict | None
     compile_s: float
     wall_s: float
+    training_check: dict | None = None
 
     @property
     def tuned_gains(self) -> dict[str, float]:
@@ -706,7 +719,16 @@ class TuneResult:
         return None
 
     def table(self) -> str:
-        return heldout_table(self.heldout) if self.heldout else "(no held-out evaluation)"
+        lines = []
+        c = self.training_check
+        if c:
+            at = "the start" if c["selected_step"] < 0 else f"step {c['selected_step']}"
+            lines.append(
+                f"training runs 0..{c['runs'] - 1}, hard logic: start {c['initial']:.5g}, last "
+                f"step {c['last']:.5g}, result ({at}) {c['tuned']:.5g}"
+            )
+        lines.append(heldout_table(self.heldout) if self.heldout else "(no held-out evaluation)")
+        return "\n".join(lines)
 
     def summary(self) -> dict[str, Any]:
         out = {
@@ -714,6 +736,7 @@ class TuneResult:
             for k in ("names", "initial", "tuned", "objective", "method", "seed", "batch")
         }
         out.update(steps=self.steps, compile_s=self.compile_s, wall_s=self.wall_s)
+        out["training_check"] = self.training_check
         if self.heldout:
             out["heldout"] = {k: v for k, v in self.heldout.items() if k != "outcomes"}
         return out
@@ -775,7 +798,7 @@ def _temperatures(problem: _Problem, temperature, steps) -> list:
     if problem.law_temperature is None:
         return [None] * steps  # the law has no relaxation temperature
     start, end = (
-        (4.0 * problem.law_temperature, problem.law_temperature)
+        (problem.law_temperature, problem.law_temperature / 4.0)
         if temperature is None
         else (temperature if isinstance(temperature, tuple) else (temperature, temperature))
     )
@@ -804,6 +827,8 @@ def tune(
     population: int = 4,
     sigma: float = 0.1,
     confidence: float = 0.95,
+    check_runs: int = 256,
+    check_every: int | None = None,
     overrides=(),
     callback: Callable[[dict], None] | None = None,
 ) -> TuneResult:
@@ -822,7 +847,7 @@ def tune(
         learning_rate: of the default optimiser (:func:`default_optimizer`), in theta units
             (log of the gains: 0.05 is a 5 % change); optimizer: any optax transformation.
         temperature: relaxation temperature ``(start, end)`` annealed geometrically, or one
-            number; default ``(4 T, T)`` with ``T`` the scenario's own ``temperature``.
+            number; default ``(T, T / 4)`` with ``T`` the scenario's own ``temperature``.
         train_runs: size of the training set of run indices (default ``batch * steps``).
         heldout_runs: held-out runs of the final paired evaluation (0: none).
         eval_every, eval_runs: evaluate the hard held-out objective on ``eval_runs`` held-out
@@ -830,6 +855,10 @@ def tune(
         gradient: ``"forward"`` (``jax.jacfwd``) or ``"reverse"`` (``jax.grad``).
         population, sigma: antithetic pairs per generation and the perturbation in theta
             (``method="es"``).
+        check_runs, check_every: every ``check_every`` steps (default: an eighth of the
+            steps) the hard objective of the gains on the first ``check_runs`` training runs;
+            the result is the checked gains (or the start) where it is lowest
+            (:attr:`TuneResult.training_check`); ``check_runs=0``: the last step's gains.
         overrides: ``section.field=value`` applied to ``scenario`` first.
         callback: called with each step's history record.
 
@@ -848,6 +877,8 @@ def tune(
         ("eval_every", eval_every, 0),
         ("eval_runs", eval_runs, 1),
         ("population", population, 1),
+        ("check_runs", check_runs, 0),
+        ("check_every", 1 if check_every is None else check_every, 1),
     ):
         if isinstance(value, bool) or not isinstance(value, int) or value < least:
             raise ScenarioError(f"{name}: {value!r}; allowed: an integer >= {least}")
@@ -872,11 +903,34 @@ def tune(
     opt = optimizer or default_optimizer(learning_rate, steps)
     temps = _temperatures(problem, temperature, steps)
     run = _run_adam if method == "adam" else _run_es
+    check_indices = np.arange(min(check_runs, train_runs))
+    monitor = dict(
+        eval_every=eval_every,
+        eval_runs=eval_runs,
+        check_runs=check_runs,
+        check_every=max(steps // 8, 1) if check_every is None else check_every,
+        check_indices=check_indices,
+    )
     history, theta, compile_s, wall_s = run(
         problem, theta0, opt, temps, batch, steps, train_runs, gradient, population, sigma,
-        eval_every, eval_runs, callback, seed,
+        monitor, callback, seed,
     )  # fmt: skip
     tuned = [float(x) for x in problem.param.gains(jnp.asarray(theta))]
+    check = None
+    if check_runs:
+        # the result is the checked point (or the start) with the lowest hard objective on
+        # the check's training runs: a relaxation that drifts late does not decide it
+        checked = [(_hard_objective(problem, initial, check_indices), -1, initial)]
+        checked += [(h["check"], h["step"], h["check_gains"]) for h in history if "check" in h]
+        best = min(checked, key=lambda c: c[0])
+        check = dict(
+            runs=len(check_indices),
+            initial=checked[0][0],
+            last=checked[-1][0],
+            tuned=best[0],
+            selected_step=best[1],
+        )
+        tuned = list(best[2])
     tuned_scenario = _with_gains(scenario, names, tuned)
     heldout = (
         evaluate_heldout(problem, initial, tuned, heldout_runs, confidence=confidence)
@@ -885,7 +939,7 @@ def tune(
     )
     return TuneResult(
         scenario, tuned_scenario, names, initial, tuned, objective_.spec, method, seed, batch,
-        steps, history, heldout, compile_s, wall_s,
+        steps, history, heldout, compile_s, wall_s, check,
     )  # fmt: skip
 
 
@@ -898,12 +952,6 @@ def _with_gains(scenario: Scenario, names, values) -> Scenario:
         + ", ".join(f"{n.split('.')[-1]} = {v:.6g}" for n, v in zip(names, values, strict=True))
         + ")",
     )
-
-
-def _heldout_objective(problem, gains, eval_runs) -> float:
-    idx, valid = problem.padded(heldout_indices(eval_runs))
-    fn = problem.jitted("hard", lambda: problem.hard)
-    return float(fn(problem.args, jnp.asarray(gains), idx, valid)[0])
 
 
 def _record(problem, step, value, theta, temperature, runs, wall_s):
@@ -919,7 +967,7 @@ def _record(problem, step, value, theta, temperature, runs, wall_s):
 
 def _run_adam(
     problem, theta, opt, temps, batch, steps, train_runs, gradient, population, sigma,
-    eval_every, eval_runs, callback, seed,
+    monitor, callback, seed,
 ):  # fmt: skip
     def build_step():
         def value_and_grad(args, th, temperature, idx, valid):
@@ -953,7 +1001,7 @@ def _run_adam(
         theta = np.asarray(theta)
         wall += time.perf_counter() - t0
         rec["wall_s"] = wall
-        _maybe_eval(problem, rec, theta, s, steps, eval_every, eval_runs)
+        _monitor(problem, rec, theta, s, steps, monitor)
         history.append(rec)
         if callback:
             callback(rec)
@@ -971,16 +1019,41 @@ def _compiled_update(opt):
     return jax.jit(update)
 
 
-def _maybe_eval(problem, rec, theta, s, steps, eval_every, eval_runs):
-    if eval_every and (s % eval_every == 0 or s == steps - 1):
-        gains = problem.param.gains(jnp.asarray(theta))  # after this step's update
-        rec["heldout"] = _heldout_objective(problem, gains, eval_runs)
-        rec["heldout_gains"] = [float(x) for x in gains]
+def _hard_objective(problem, gains, indices) -> float:
+    idx, valid = problem.padded(indices)
+    fn = problem.jitted("hard", lambda: problem.hard)
+    return float(fn(problem.args, jnp.asarray(gains), idx, valid)[0])
+
+
+def hard_objectives(scenario, params, objective, gains, runs: int, seed: int = 0) -> list[float]:
+    """The hard objective of each gain vector of ``gains`` (file units) on the same ``runs``
+    held-out runs: a grid check, a sweep or a baseline on the runs :func:`tune` holds out."""
+    if not isinstance(scenario, Scenario):
+        scenario = load_scenario(scenario)
+    resolved = resolve_gains(scenario, params)
+    problem = _Problem(scenario, resolved, parse_objective(objective, scenario), seed)
+    return [_hard_objective(problem, g, heldout_indices(runs)) for g in gains]
+
+
+def _monitor(problem, rec, theta, s, steps, monitor):
+    """Hard-logic checks after step ``s``'s update (their time is not in ``wall_s``): on the
+    check's training runs every ``check_every`` steps (they select the result) and on held-out
+    runs every ``eval_every`` steps (they only record)."""
+    gains = [float(x) for x in problem.param.gains(jnp.asarray(theta))]
+    last = s == steps - 1
+    every = monitor["check_every"]
+    if monitor["check_runs"] and every and ((s + 1) % every == 0 or last):
+        rec["check"] = _hard_objective(problem, gains, monitor["check_indices"])
+        rec["check_gains"] = gains
+    every = monitor["eval_every"]
+    if every and (s % every == 0 or last):
+        rec["heldout"] = _hard_objective(problem, gains, heldout_indices(monitor["eval_runs"]))
+        rec["heldout_gains"] = gains
 
 
 def _run_es(
     problem, theta, opt, temps, batch, steps, train_runs, gradient, population, sigma,
-    eval_every, eval_runs, callback, seed,
+    monitor, callback, seed,
 ):  # fmt: skip
     per_member = max(batch // (2 * population), 1)
     rng = np.random.default_rng(seed)
@@ -1015,7 +1088,7 @@ def _run_es(
         theta = np.asarray(theta)
         wall += time.perf_counter() - t0
         rec["wall_s"] = wall
-        _maybe_eval(problem, rec, theta, s, steps, eval_every, eval_runs)
+        _monitor(problem, rec, theta, s, steps, monitor)
         history.append(rec)
         if callback:
             callback(rec)
@@ -1046,6 +1119,7 @@ __all__ = [
     "train_indices",
     "heldout_indices",
     "evaluate_heldout",
+    "hard_objectives",
     "paired_interval",
     "progress_line",
 ]

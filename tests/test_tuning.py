@@ -80,14 +80,13 @@ def test_objective_gradient_matches_central_differences_of_a_per_run_loop(gradie
 
 
 def test_identical_seeds_give_identical_tuned_gains_and_other_seeds_do_not():
-    kw = dict(batch=8, steps=4, heldout_runs=0, learning_rate=0.2)
+    kw = dict(batch=8, steps=4, heldout_runs=0, learning_rate=0.2, check_runs=8)
     a = tune(toy(), "guidance.pn.n", "miss_rms", seed=5, **kw)
     b = tune(toy(), "guidance.pn.n", "miss_rms", seed=5, **kw)
     c = tune(toy(), "guidance.pn.n", "miss_rms", seed=6, **kw)
     assert a.tuned == b.tuned
     assert [h["objective"] for h in a.history] == [h["objective"] for h in b.history]
-    assert a.tuned != c.tuned
-    assert a.tuned != a.initial
+    assert a.history[-1]["gains"] != c.history[-1]["gains"]
 
 
 def test_training_and_heldout_runs_never_overlap(monkeypatch):
@@ -164,7 +163,19 @@ def test_gradient_free_baseline_spends_the_same_runs():
     adam = tune(toy(), "guidance.pn.n", "miss_rms", **kw)
     es = tune(toy(), "guidance.pn.n", "miss_rms", method="es", population=2, **kw)
     assert [h["runs"] for h in es.history] == [h["runs"] for h in adam.history]
-    assert es.tuned != es.initial
+    assert es.history[-1]["gains"] != es.initial  # it moved
+
+
+def test_the_result_is_the_checked_point_with_the_lowest_hard_training_objective():
+    r = tune(toy(), "guidance.pn.n", "miss_rms", batch=8, steps=4, heldout_runs=0, check_every=1,
+             check_runs=16, learning_rate=0.3)  # fmt: skip
+    checked = [(r.training_check["initial"], r.initial)]
+    checked += [(h["check"], h["check_gains"]) for h in r.history]
+    assert len(checked) == 5
+    assert r.tuned == min(checked, key=lambda c: c[0])[1]
+    # each check is the hard objective of those gains on training runs 0..15 (per-run loop)
+    value, gains = checked[2]
+    np.testing.assert_allclose(value, per_run_objective(toy(), gains[0], range(16), 0, 0.0))
 
 
 def test_tuned_toml_round_trips_through_gnc_jax_run(tmp_path):
