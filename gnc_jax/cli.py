@@ -322,8 +322,8 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument(
         "--learning-rate",
         type=_number("--learning-rate", float, lambda v: 0 < v < float("inf"), "a number > 0"),
-        default=0.05,
-        help="Adam step in log-gain units (default 0.05: 5 %%)",
+        default=0.1,
+        help="Adam step in log-gain units (default 0.1: 10 %%)",
     )
     q.add_argument(
         "--heldout",
