@@ -767,13 +767,19 @@ def plot_training(result: TuneResult, path) -> None:
     from .plotting import pyplot
 
     plt = pyplot()
-    steps = [h["step"] for h in result.history]
+    steps = [h["step"] for h in result.history]  # the gains and objective before its update
     n = len(result.names)
     fig, axes = plt.subplots(n + 1, 1, figsize=(6.4, 2.0 * (n + 1)), sharex=True)
     axes[0].plot(steps, [h["objective"] for h in result.history], label="training batch")
-    label = "training batch" + (" (relaxed)" if result.method == "adam" else "")
+    relaxed = any(h.get("temperature") is not None for h in result.history)
+    label = "training batch" + (
+        " (relaxed)" if relaxed else " (hard)" if result.method == "es" else ""
+    )
     axes[0].lines[0].set_label(label)
-    checks = [(h["step"], h["check"]) for h in result.history if h.get("check") is not None]
+    # a check after step s's update is of the gains plotted at s + 1
+    checks = [(h["step"] + 1, h["check"]) for h in result.history if h.get("check") is not None]
+    if result.training_check:
+        checks.insert(0, (0, result.training_check["initial"]))
     if checks:
         axes[0].plot(*zip(*checks, strict=True), "s", label="hard check, training runs")
     ev = [(h["step"], h["heldout"]) for h in result.history if h.get("heldout") is not None]
@@ -783,7 +789,7 @@ def plot_training(result: TuneResult, path) -> None:
     selected = (result.training_check or {}).get("selected_step")
     if selected is not None:
         for ax in axes:
-            ax.axvline(selected, color="0.6", lw=0.8, ls="--")
+            ax.axvline(selected + 1, color="0.6", lw=0.8, ls="--")
     axes[0].set_ylabel("objective")
     axes[0].set_title(f"{result.scenario.name}: {result.objective} ({result.method})", fontsize=9)
     for i, name in enumerate(result.names):
