@@ -238,3 +238,43 @@ def test_a_non_tunable_law_field_names_the_tunable_ones():
     with pytest.raises(ScenarioError) as e:
         resolve_gains(gj.load_scenario("deep-impact-los"), ["guidance.los.temperature"])
     assert "guidance.los.k1, guidance.los.k2" in str(e.value)
+
+
+def test_built_in_terms_match_numpy_and_their_relaxations_tend_to_them():
+    from typing import NamedTuple
+
+    class Out(NamedTuple):
+        status: np.ndarray
+        miss_m: np.ndarray
+        dv_mps: np.ndarray
+        b_t_m: np.ndarray
+        b_r_m: np.ndarray
+        downrange_err_km: np.ndarray
+        crossrange_err_km: np.ndarray
+        load_peak_g: np.ndarray
+
+    rng = np.random.default_rng(3)
+    n = 400
+    out = Out(
+        np.zeros(n, int),
+        *(np.abs(rng.normal(1.0, 0.5, (7, n))) * [[80], [8], [60], [60], [1], [1], [5]]),
+    )
+    w = (rng.uniform(size=n) > 0.1).astype(float)  # failed runs weigh 0
+    k = w > 0
+    spec = "miss_rms+2*dv_mean+3*hit_probability(70)+chute_rms+4*peak_load(6)"
+    objective = parse_objective(spec, toy())
+    hit = np.hypot(out.b_t_m, out.b_r_m)[k] <= 70.0  # impactor: distance from the centre
+    expected = {
+        "miss_rms": np.sqrt(np.mean(out.miss_m[k] ** 2)),
+        "dv_mean": np.mean(out.dv_mps[k]),
+        "hit_probability(70)": 1.0 - np.mean(hit),
+        "chute_rms": np.sqrt(np.mean(out.downrange_err_km[k] ** 2 + out.crossrange_err_km[k] ** 2)),
+        "peak_load(6)": np.mean(np.maximum(out.load_peak_g[k] - 6.0, 0.0)),
+    }
+    got = objective.term_values(out, w)
+    for name, value in expected.items():
+        np.testing.assert_allclose(got[name], value, rtol=1e-12, err_msg=name)
+    total = sum(wt * expected[t] for wt, t in zip([1, 2, 3, 1, 4], expected, strict=True))
+    np.testing.assert_allclose(float(objective.value(out, w)), total, rtol=1e-12)
+    smooth = [abs(float(objective.value(out, w, t)) - total) for t in (1e-1, 1e-2, 1e-4)]
+    assert smooth[0] > smooth[1] > smooth[2] and smooth[2] < 1e-2
