@@ -965,6 +965,7 @@ def _with_gains(scenario: Scenario, names, values) -> Scenario:
     tuned = scenario.with_overrides(dict(zip(names, values, strict=True)))
     return dataclasses.replace(
         tuned,
+        paper={},  # the published numbers are for the paper's gains, not these
         name=f"{scenario.name}-tuned",
         description=f"{scenario.description} (tuned: "
         + ", ".join(f"{n.split('.')[-1]} = {v:.6g}" for n, v in zip(names, values, strict=True))
