@@ -23,6 +23,7 @@ from .reproduction import reproduce
 from .results import ResultsError, load_results
 from .scenario import Scenario, ScenarioError, list_scenarios, load_scenario
 from .systems import AbstractSystem, get_system, register_system, systems
+from .tuning import TuneResult, tune
 
 __version__ = "0.1.0"
 
@@ -49,4 +50,6 @@ __all__ = [
     "ScenarioError",
     "list_scenarios",
     "load_scenario",
+    "tune",
+    "TuneResult",
 ]

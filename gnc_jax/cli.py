@@ -1,4 +1,4 @@
-"""Command line: ``gnc-jax list | run | reproduce | envelope | report``.
+"""Command line: ``gnc-jax list | run | reproduce | envelope | report | tune``.
 
 Every command is one or two calls of the Python API (``gnc_jax.load_scenario``,
 ``gnc_jax.run_study``, ``Study.save``, ``gnc_jax.reproduce``, ``gnc_jax.report``). Bad input
@@ -292,6 +292,39 @@ def _where(q) -> None:
     )
 
 
+def cmd_tune(args) -> int:
+    from .scenario import load_scenario
+    from .tuning import progress_line, tune
+
+    scenario = load_scenario(args.scenario, overrides=args.set or ())
+    _writable_dir(args.out)
+    names = [n.strip() for n in args.params.split(",") if n.strip()]
+    result = tune(
+        scenario,
+        names,
+        args.objective,
+        batch=args.batch,
+        steps=args.steps,
+        seed=args.seed,
+        method=args.method,
+        learning_rate=args.learning_rate,
+        heldout_runs=args.heldout,
+        eval_every=args.eval_every,
+        eval_runs=args.eval_runs,
+        callback=lambda rec: print(progress_line(rec, names), flush=True),
+    )
+    print(
+        f"{scenario.name}: {args.method}, {args.steps} steps of {args.batch} runs, compile "
+        f"{result.compile_s:.1f} s, training {result.wall_s:.1f} s"
+    )
+    for name, a, b in zip(names, result.initial, result.tuned, strict=True):
+        print(f"  {name}: {a:.6g} -> {b:.6g}")
+    print(result.table())
+    paths = result.save(args.out)
+    print("wrote " + ", ".join(paths.values()))
+    return 0
+
+
 def _study_limits(q) -> None:
     from .montecarlo import MAX_HOURS
 
@@ -393,6 +426,53 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _where(q)
     q.set_defaults(func=cmd_envelope)
+
+    q = sub.add_parser("tune", help="tune guidance gains on dispersed runs (gradients)")
+    q.add_argument("scenario", help="packaged scenario name (gnc-jax list) or a .toml path")
+    q.add_argument(
+        "--params", required=True, help="comma-separated gains: guidance.los.k1,guidance.los.k2"
+    )
+    q.add_argument(
+        "--objective",
+        default=None,
+        help="e.g. 'miss_rms+10*dv_mean' (terms: miss_rms, dv_mean, hit_probability, chute_rms, "
+        "peak_load(LIMIT_G)); default: the system's smooth objective",
+    )
+    q.add_argument("--batch", type=_positive_int("--batch"), default=64, help="runs per step")
+    q.add_argument("--steps", type=_positive_int("--steps"), default=40, help="optimiser steps")
+    q.add_argument("--seed", type=_seed, default=0, help="root seed of the run keys")
+    q.add_argument("--out", required=True, help="directory for tuned.toml, training.png, ...")
+    q.add_argument(
+        "--set",
+        action="append",
+        metavar="SECTION.FIELD=VALUE",
+        help="override a scenario field before tuning (repeatable)",
+    )
+    q.add_argument(
+        "--method", choices=("adam", "es"), default="adam", help="adam (gradients) or es"
+    )
+    q.add_argument(
+        "--learning-rate",
+        type=_number("--learning-rate", float, lambda v: 0 < v < float("inf"), "a number > 0"),
+        default=0.1,
+        help="Adam step in log-gain units (default 0.1: 10 %%)",
+    )
+    q.add_argument(
+        "--heldout",
+        type=_number("--heldout", int, lambda v: v >= 0, "an integer >= 0"),
+        default=1000,
+        help="held-out runs of the paired evaluation (default 1000)",
+    )
+    q.add_argument(
+        "--eval-every",
+        type=_number("--eval-every", int, lambda v: v >= 0, "an integer >= 0"),
+        default=0,
+        help="evaluate the held-out objective every this many steps (0: only at the end)",
+    )
+    q.add_argument(
+        "--eval-runs", type=_positive_int("--eval-runs"), default=256, help="runs of those"
+    )
+    q.set_defaults(func=cmd_tune)
 
     q = sub.add_parser("report", help="PNG figures of a study directory")
     q.add_argument("dir", help="directory written by gnc-jax run --out")

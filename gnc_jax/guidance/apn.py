@@ -151,6 +151,8 @@ class AugmentedPNGuidance(AbstractInterceptGuidance):
     )
     relaxed: bool = eqx.field(static=True, default=False)
 
+    ordered_gains = (("trigger_on", "trigger_off"),)
+
     @classmethod
     def check(cls, section, config):
         if section["trigger_off"] >= section["trigger_on"]:

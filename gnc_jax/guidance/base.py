@@ -80,6 +80,9 @@ class AbstractGuidanceLaw(eqx.Module):
     """
 
     law_name: ClassVar[str] = ""
+    # (larger, smaller) file names of gains whose order the law's check requires (k1 >= k2):
+    # tuning keeps each pair ordered by its reparametrisation (gnc_jax.tune)
+    ordered_gains: ClassVar[tuple[tuple[str, str], ...]] = ()
 
     @abc.abstractmethod
     def init(self, nav, ctx): ...

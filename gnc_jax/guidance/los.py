@@ -94,6 +94,8 @@ class LOSSwitchingCurveGuidance(AbstractImpactorGuidance):
     )
     relaxed: bool = eqx.field(static=True, default=False)
 
+    ordered_gains = (("k1", "k2"),)
+
     @classmethod
     def check(cls, section, config):
         if section["k2"] > section["k1"]:

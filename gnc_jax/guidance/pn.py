@@ -69,6 +69,8 @@ class ProportionalNavigationGuidance(AbstractImpactorGuidance):
     )
     relaxed: bool = eqx.field(static=True, default=False)
 
+    ordered_gains = (("trigger_on_mmps2", "trigger_off_mmps2"),)
+
     @classmethod
     def check(cls, section, config):
         if section["trigger_off_mmps2"] >= section["trigger_on_mmps2"]:

@@ -1,0 +1,280 @@
+"""Gain tuning (gnc_jax.tuning, ``gnc-jax tune``), on the toy system of tests/toy_system.py.
+
+The toy double-integrator intercept compiles in about a second, so every check here runs the
+whole tuner (gradients, the optimiser, the evaluation, the files) at CI cost. Each compares
+with something independent: central differences of the objective computed by a per-run loop
+over scenarios rebuilt from overrides, a second run of the tuner, the run-index sets, a fresh
+``gnc-jax run`` of the written file.
+"""
+
+import json
+import os
+import pathlib
+import subprocess
+import sys
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import gnc_jax as gj
+from gnc_jax import cli
+from gnc_jax import tuning as tune_module
+from gnc_jax.scenario import ScenarioError
+from gnc_jax.tuning import (
+    HELDOUT_OFFSET,
+    Reparametrisation,
+    heldout_indices,
+    paired_interval,
+    parse_objective,
+    resolve_gains,
+    train_indices,
+    tune,
+)
+
+TOY = str(pathlib.Path(__file__).with_name("toy.toml"))
+# a shorter, noisier engagement than the demo: a few hundred steps per run
+FAST = {"geometry.range_m": 3000.0, "geometry.dispersion_m": 200.0, "navigation.noise_m": 5.0}
+
+
+def toy(**extra):
+    return gj.load_scenario(TOY, overrides={**FAST, **extra})
+
+
+def per_run_objective(scenario, n, runs, seed, weight):
+    """miss_rms + weight * dv_mean of runs ``runs`` flown one at a time by the scenario rebuilt
+    with ``guidance.pn.n = n`` (the scenario path, not the tuner's leaves)."""
+    s = scenario.with_overrides({"guidance.pn.n": n})
+    miss, dv = [], []
+    for i in runs:
+        out, _ = gj.simulate_one(s, index=int(i), seed=seed, record=False)
+        miss.append(float(out.miss_m))
+        dv.append(float(out.dv_mps))
+    return np.sqrt(np.mean(np.square(miss))) + weight * np.mean(dv)
+
+
+@pytest.mark.parametrize("gradient", ["forward", "reverse"])
+def test_objective_gradient_matches_central_differences_of_a_per_run_loop(gradient):
+    scenario = toy()
+    objective = parse_objective("miss_rms+0.5*dv_mean", scenario)
+    (gain,) = resolve_gains(scenario, ["guidance.pn.n"])
+    problem = tune_module._Problem(scenario, [gain], objective, seed=3)
+    idx, valid = problem.padded(train_indices(0, 6, 6))
+    n0 = float(scenario["guidance.pn.n"])
+    theta = jnp.asarray(problem.param.theta([n0]))
+    f = lambda th: problem.smooth(problem.args, th, None, idx, valid)  # noqa: E731
+    grad_fn = jax.jacfwd(f) if gradient == "forward" else jax.grad(f)
+    d_theta = float(jax.jit(grad_fn)(theta)[0])
+    # theta is log(n - lo): d/dn = d/dtheta / (n - lo)
+    d_n = d_theta / (n0 - gain.lo)
+    value = float(jax.jit(f)(theta))
+    np.testing.assert_allclose(value, per_run_objective(scenario, n0, range(6), 3, 0.5), rtol=1e-9)
+    h = 1e-4
+    fd = (
+        per_run_objective(scenario, n0 + h, range(6), 3, 0.5)
+        - per_run_objective(scenario, n0 - h, range(6), 3, 0.5)
+    ) / (2 * h)
+    assert abs(fd) > 1e-6  # the objective depends on the gain
+    np.testing.assert_allclose(d_n, fd, rtol=1e-4)
+
+
+def test_identical_seeds_give_identical_tuned_gains_and_other_seeds_do_not():
+    kw = dict(batch=8, steps=4, heldout_runs=0, learning_rate=0.2, check_runs=8)
+    a = tune(toy(), "guidance.pn.n", "miss_rms", seed=5, **kw)
+    b = tune(toy(), "guidance.pn.n", "miss_rms", seed=5, **kw)
+    c = tune(toy(), "guidance.pn.n", "miss_rms", seed=6, **kw)
+    assert a.tuned == b.tuned
+    assert [h["objective"] for h in a.history] == [h["objective"] for h in b.history]
+    assert a.history[-1]["gains"] != c.history[-1]["gains"]
+
+
+def test_training_and_heldout_runs_never_overlap(monkeypatch):
+    batch, steps = 6, 5
+    trained = set()
+    for s in range(steps):
+        trained |= set(train_indices(s, batch, batch * steps).tolist())
+    assert trained == set(range(batch * steps))  # a fresh batch each step, each run once
+    assert not trained & set(heldout_indices(1000).tolist())
+    assert heldout_indices(3)[0] == HELDOUT_OFFSET
+    with pytest.raises(ScenarioError, match="train_runs"):
+        tune(toy(), "guidance.pn.n", batch=4, steps=2, train_runs=HELDOUT_OFFSET + 1)
+
+    # the indices the tuner actually flies: spy on both index functions
+    seen = {"train": set(), "heldout": set()}
+
+    def spy(name, fn):
+        def wrapped(*args):
+            out = fn(*args)
+            seen[name] |= set(np.asarray(out).tolist())
+            return out
+
+        return wrapped
+
+    monkeypatch.setattr(tune_module, "train_indices", spy("train", train_indices))
+    monkeypatch.setattr(tune_module, "heldout_indices", spy("heldout", heldout_indices))
+    result = tune(toy(), "guidance.pn.n", "miss_rms", batch=4, steps=3, heldout_runs=10)
+    assert seen["train"] == set(range(12))
+    assert seen["heldout"] == set(range(HELDOUT_OFFSET, HELDOUT_OFFSET + 10))
+    assert result.heldout["paired_runs"] == 10
+
+
+def test_heldout_table_is_the_hard_paired_evaluation():
+    result = tune(toy(), "guidance.pn.n", "miss_rms+0.5*dv_mean", batch=8, steps=3, heldout_runs=12)
+    rows = {r["metric"]: r for r in result.heldout["rows"]}
+    for side, gains in (("initial", result.initial), ("tuned", result.tuned)):
+        # the same held-out runs, flown one at a time by the scenario with that gain
+        expected = per_run_objective(toy(), gains[0], heldout_indices(12), 0, 0.5)
+        np.testing.assert_allclose(rows["objective"][side], expected, rtol=1e-9)
+    r = rows["objective"]
+    assert r["ci_low"] <= r["difference"] <= r["ci_high"]
+    assert "miss_rms" in rows and "dv_mean" in rows
+
+
+def test_paired_bootstrap_interval_matches_the_normal_interval_of_a_mean_difference():
+    rng = np.random.default_rng(0)
+    a = rng.normal(10.0, 1.0, 4000)
+    b = a + rng.normal(0.3, 0.5, 4000)  # paired: the runs' common part cancels
+    diff, lo, hi = paired_interval(lambda i: a[i].mean(), lambda i: b[i].mean(), 4000)
+    d = b - a
+    half = 1.96 * d.std() / np.sqrt(len(d))
+    np.testing.assert_allclose(diff, d.mean(), rtol=1e-12)
+    np.testing.assert_allclose([lo, hi], [d.mean() - half, d.mean() + half], atol=0.15 * half)
+
+
+def test_reparametrisation_keeps_k1_above_k2_and_inverts():
+    scenario = gj.load_scenario("deep-impact-los")
+    gains = resolve_gains(scenario, ["guidance.los.k1", "guidance.los.k2"])
+    param = Reparametrisation.of(scenario, gains)
+    np.testing.assert_allclose(param.theta([4.0, 1.0]), [np.log(3.0), 0.0], atol=1e-15)
+    for theta in np.random.default_rng(1).normal(0.0, 1.5, (50, 2)):
+        k1, k2 = np.asarray(param.gains(jnp.asarray(theta)))
+        assert k1 > k2 > 0.0
+        if k1 < 100.0:  # k1's upper bound clips
+            np.testing.assert_allclose(param.theta([k1, k2]), theta, rtol=1e-9, atol=1e-9)
+    # one side of the pair alone stays on its side of the fixed other
+    (k2_only,) = resolve_gains(scenario, ["guidance.los.k2"])
+    param = Reparametrisation.of(scenario, [k2_only])
+    assert all(0 < float(param.gains(jnp.asarray([t]))[0]) < 4.0 for t in (-30.0, 0.0, 30.0))
+
+
+def test_gradient_free_baseline_spends_the_same_runs():
+    kw = dict(batch=8, steps=3, heldout_runs=0, seed=1)
+    adam = tune(toy(), "guidance.pn.n", "miss_rms", **kw)
+    es = tune(toy(), "guidance.pn.n", "miss_rms", method="es", population=2, **kw)
+    assert [h["runs"] for h in es.history] == [h["runs"] for h in adam.history]
+    assert es.history[-1]["gains"] != es.initial  # it moved
+
+
+def test_the_result_is_the_checked_point_with_the_lowest_hard_training_objective():
+    r = tune(toy(), "guidance.pn.n", "miss_rms", batch=8, steps=4, heldout_runs=0, check_every=1,
+             check_runs=16, learning_rate=0.3)  # fmt: skip
+    checked = [(r.training_check["initial"], r.initial)]
+    checked += [(h["check"], h["check_gains"]) for h in r.history]
+    assert len(checked) == 5
+    assert r.tuned == min(checked, key=lambda c: c[0])[1]
+    # each check is the hard objective of those gains on training runs 0..15 (per-run loop)
+    value, gains = checked[2]
+    np.testing.assert_allclose(value, per_run_objective(toy(), gains[0], range(16), 0, 0.0))
+
+
+def test_tuned_toml_round_trips_through_gnc_jax_run(tmp_path):
+    """``gnc-jax tune`` in a fresh process writes tuned.toml; ``gnc-jax run`` flies it, and its
+    runs equal a study of the scenario with the tuned gain set by override."""
+    tests_dir = pathlib.Path(__file__).parent
+    env = {**os.environ, "GNC_JAX_PLUGINS": "toy_system"}
+    env["PYTHONPATH"] = os.pathsep.join([str(tests_dir), env.get("PYTHONPATH", "")])
+    out = tmp_path / "tuned"
+    sets = [x for k, v in FAST.items() for x in ("--set", f"{k}={v}")]
+    argv = [sys.executable, "-m", "gnc_jax", "tune", TOY, "--params", "guidance.pn.n"]
+    argv += ["--objective", "miss_rms", "--batch", "8", "--steps", "3", "--heldout", "8"]
+    done = subprocess.run(
+        argv + ["--out", str(out), *sets], env=env, capture_output=True, text=True
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.count("step ") >= 3 and "held-out" in done.stdout
+    for name in ("tuned.toml", "training.json", "heldout.json"):
+        assert (out / name).is_file()
+    assert (out / "training.png").read_bytes()[:4] == b"\x89PNG"
+    tuned = json.loads((out / "heldout.json").read_text())["tuned"][0]
+    scenario = gj.load_scenario(out / "tuned.toml")
+    assert scenario["guidance.pn.n"] == tuned
+
+    assert (
+        cli.main(["run", str(out / "tuned.toml"), "--runs", "6", "--out", str(tmp_path / "r")]) == 0
+    )
+    ran = json.loads((tmp_path / "r" / "summary.json").read_text())
+    expected = gj.run_study(toy(**{"guidance.pn.n": tuned}), runs=6, progress=False).summary()
+    np.testing.assert_allclose(ran["miss_rms_m"], expected["miss_rms_m"], rtol=1e-9)
+
+
+BAD_TUNE = [
+    (["--params", "guidance.pn.nn"], "guidance.pn.nn: not a tunable leaf of toy-intercept"),
+    (["--params", "guidance.dt_s"], "guidance.dt_s: not a tunable leaf"),
+    (["--params", "guidance.zem.k"], "guidance.zem.k: a gain of a law this scenario does not fly"),
+    (["--params", "guidance.pn.n", "--objective", "miss"], "objective: 'miss'"),
+    (["--params", "guidance.pn.n", "--objective", "chute_rms"], "objective: chute_rms needs"),
+    (["--params", "guidance.pn.n", "--objective", "peak_load"], "peak_load needs an argument"),
+    (["--params", "guidance.pn.n", "--set", "guidance.pn.n=0.5"], "at its lower bound"),
+]
+
+
+@pytest.mark.parametrize("args,message", BAD_TUNE)
+def test_bad_tune_input_is_one_line_before_compilation(
+    args, message, capsys, monkeypatch, tmp_path
+):
+    def no_compile(*a, **k):
+        raise AssertionError("compiled despite bad input")
+
+    monkeypatch.setattr(tune_module, "batch_function", no_compile)
+    code = cli.main(["tune", TOY, "--out", str(tmp_path), *args])
+    err = capsys.readouterr().err.strip()
+    assert code == 2, err
+    assert len(err.splitlines()) == 1
+    assert message in err and "allowed" in err
+
+
+def test_a_non_tunable_law_field_names_the_tunable_ones():
+    with pytest.raises(ScenarioError) as e:
+        resolve_gains(gj.load_scenario("deep-impact-los"), ["guidance.los.temperature"])
+    assert "guidance.los.k1, guidance.los.k2" in str(e.value)
+
+
+def test_built_in_terms_match_numpy_and_their_relaxations_tend_to_them():
+    from typing import NamedTuple
+
+    class Out(NamedTuple):
+        status: np.ndarray
+        miss_m: np.ndarray
+        dv_mps: np.ndarray
+        b_t_m: np.ndarray
+        b_r_m: np.ndarray
+        downrange_err_km: np.ndarray
+        crossrange_err_km: np.ndarray
+        load_peak_g: np.ndarray
+
+    rng = np.random.default_rng(3)
+    n = 400
+    out = Out(
+        np.zeros(n, int),
+        *(np.abs(rng.normal(1.0, 0.5, (7, n))) * [[80], [8], [60], [60], [1], [1], [5]]),
+    )
+    w = (rng.uniform(size=n) > 0.1).astype(float)  # failed runs weigh 0
+    k = w > 0
+    spec = "miss_rms+2*dv_mean+3*hit_probability(70)+chute_rms+4*peak_load(6)"
+    objective = parse_objective(spec, toy())
+    hit = np.hypot(out.b_t_m, out.b_r_m)[k] <= 70.0  # impactor: distance from the centre
+    expected = {
+        "miss_rms": np.sqrt(np.mean(out.miss_m[k] ** 2)),
+        "dv_mean": np.mean(out.dv_mps[k]),
+        "hit_probability(70)": 1.0 - np.mean(hit),
+        "chute_rms": np.sqrt(np.mean(out.downrange_err_km[k] ** 2 + out.crossrange_err_km[k] ** 2)),
+        "peak_load(6)": np.mean(np.maximum(out.load_peak_g[k] - 6.0, 0.0)),
+    }
+    got = objective.term_values(out, w)
+    for name, value in expected.items():
+        np.testing.assert_allclose(got[name], value, rtol=1e-12, err_msg=name)
+    total = sum(wt * expected[t] for wt, t in zip([1, 2, 3, 1, 4], expected, strict=True))
+    np.testing.assert_allclose(float(objective.value(out, w)), total, rtol=1e-12)
+    smooth = [abs(float(objective.value(out, w, t)) - total) for t in (1e-1, 1e-2, 1e-4)]
+    assert smooth[0] > smooth[1] > smooth[2] and smooth[2] < 1e-2
