@@ -88,7 +88,9 @@ def test_own_draws_are_reproducible_per_run():
     assert len(np.unique(a["miss_m"])) == 6
 
 
-def _compare_distributions(scenario, runs):
+def _p_values(scenario, runs) -> dict:
+    """p-values of the hypothesis that the peer's own draws and gnc_jax's give the same
+    distributions of the outcomes (two-sample KS; chi-square on the firing counts)."""
     # In chunks of RUNS: the executable compiled for the run-for-run test serves again.
     ref = gj.run_study(scenario, runs=runs, seed=0, chunk_size=RUNS, progress=False).outcomes
     got = peer.run_own(scenario, runs, seed=987_654)
@@ -102,17 +104,21 @@ def _compare_distributions(scenario, runs):
     bins = [-0.5, mode - 0.5, mode + 0.5, np.inf]
     table = np.array([np.histogram(x["firings"], bins)[0] for x in (got, ref)])
     p_values["firings"] = stats.chi2_contingency(table[:, table.sum(axis=0) > 0]).pvalue
-    # Six tests of one hypothesis (same distributions): 1 % for the family (Bonferroni).
-    alpha = 0.01 / len(p_values)
-    assert all(p > alpha for p in p_values.values()), p_values
+    return p_values
+
+
+# Six tests of one hypothesis (same distributions): 1 % for the family (Bonferroni).
+ALPHA = 0.01 / 6
 
 
 def test_own_draws_match_gnc_jax_statistically():
     """CI size: 300 runs of the off-nominal approach (2000 s, about 1 s of gnc_jax)."""
-    _compare_distributions(gj.load_scenario("deep-impact-los", overrides=OFF_NOMINAL), 300)
+    p = _p_values(gj.load_scenario("deep-impact-los", overrides=OFF_NOMINAL), 300)
+    assert len(p) == 6 and all(v > ALPHA for v in p.values()), p
 
 
 @pytest.mark.slow
 def test_own_draws_match_gnc_jax_statistically_deep_impact(paper_scale):
     """The flagship scenario, 500 runs each (2000 with --paper-scale)."""
-    _compare_distributions(gj.load_scenario("deep-impact-los"), 2000 if paper_scale else 500)
+    p = _p_values(gj.load_scenario("deep-impact-los"), 2000 if paper_scale else 500)
+    assert len(p) == 6 and all(v > ALPHA for v in p.values()), p
