@@ -146,6 +146,18 @@ def main():
         for r in memory(sizes):
             print(json.dumps(r), flush=True)
         return
+    if args.only == "throughput":
+        n_los, n_cap = (2000, 256) if args.quick else (20_000, 2000)
+        for r in throughput("deep-impact-los", n_los, 200) + throughput(
+            "lunar-skip-entry", n_cap, 32
+        ):
+            print(
+                f"{r['scenario']:18s} {r['config']:28s} {r['runs']:>7,} runs {r['wall_s']:8.2f} s "
+                f"{r['runs_per_s']:9,.0f} runs/s  x{r['vs_1_device']:.2f}  compile "
+                f"{r['compile_s']:.1f} s  failed {r['failed']}",
+                flush=True,
+            )
+        return
     out = run(args.quick)
     print(out["markdown"])
     for n in out["notes"]:
