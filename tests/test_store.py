@@ -160,7 +160,15 @@ def _cli(out, *extra):
 
 def _kill_mid_study(cmd, env, out, sig, at_least):
     """Start ``cmd``, send ``sig`` once ``at_least`` chunk files exist; stderr and chunks."""
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    # SIGINT back to its default in the child: a test worker (pytest-xdist) may ignore it,
+    # and a child inherits an ignored signal (Python then installs no KeyboardInterrupt).
+    proc = subprocess.Popen(
+        cmd,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     deadline = time.time() + 120
     while len(store.chunk_files(out)) < at_least and time.time() < deadline:
         if proc.poll() is not None:
