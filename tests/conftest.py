@@ -1,5 +1,8 @@
+import os
 import pathlib
+import shutil
 import sys
+import tempfile
 
 import jax
 import pytest
@@ -29,3 +32,22 @@ def paper_scale(request) -> bool:
 @pytest.fixture
 def key():
     return jax.random.key(20101002)
+
+
+def pytest_configure(config):
+    """One persistent XLA compilation cache for the whole test session: the pytest-xdist
+    workers and every ``gnc-jax`` subprocess a test starts inherit its directory, so a program
+    one process compiled (a scenario's design, a CLI run of an example) is read, not compiled
+    again, by the next. It starts empty in each session (nothing carries over between CI
+    runs), unless ``JAX_COMPILATION_CACHE_DIR`` is set by the caller."""
+    if "JAX_COMPILATION_CACHE_DIR" not in os.environ:  # the controller (or a plain run)
+        path = tempfile.mkdtemp(prefix="gnc-jax-tests-xla-")
+        os.environ["JAX_COMPILATION_CACHE_DIR"] = path
+        config._gnc_jax_xla_cache = path
+    jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
+
+
+def pytest_unconfigure(config):
+    path = getattr(config, "_gnc_jax_xla_cache", None)
+    if path:
+        shutil.rmtree(path, ignore_errors=True)

@@ -21,6 +21,7 @@ import gnc_jax as gj
 TIME_LIMIT_S = 240.0  # per case: the first case of a family compiles its example
 EXAMPLES = {"midcourse": 20, "capsule": 20}  # the slowest to run; others: DEFAULT_EXAMPLES
 DEFAULT_EXAMPLES = 40
+CI_FRACTION = 2  # CI draws half as many cases; --paper-scale draws them all
 MAX_FIELDS = 3
 
 
@@ -31,9 +32,10 @@ def worker(tmp_path_factory):
     w.stop()
 
 
-def _settings(name):
+def _settings(name, full):
+    examples = EXAMPLES.get(name, DEFAULT_EXAMPLES)
     return settings(
-        max_examples=EXAMPLES.get(name, DEFAULT_EXAMPLES),
+        max_examples=examples if full else examples // CI_FRACTION,
         derandomize=True,
         deadline=None,
         database=None,
@@ -43,10 +45,11 @@ def _settings(name):
 
 
 @pytest.mark.parametrize("name", list(gj.systems()))
-def test_fuzzed_scenarios_run_flag_or_refuse(name, worker):
+@pytest.mark.slow
+def test_fuzzed_scenarios_run_flag_or_refuse(name, worker, paper_scale):
     outcomes = []
 
-    @_settings(name)
+    @_settings(name, paper_scale)
     @given(case=cases(name, runtime_only=True, max_fields=MAX_FIELDS))
     @example(case=Case(name, {}))  # the example itself: compiles the program the draws reuse
     def check(case):

@@ -99,7 +99,10 @@ def test_flight_stopped_when_down_equals_the_full_length_scan(capsule_scenario):
             )
 
 
-def test_downrange_gradient_wrt_tracking_gains_matches_finite_differences(capsule_scenario):
+@pytest.mark.slow
+def test_downrange_gradient_wrt_tracking_gains_matches_finite_differences(
+    capsule_scenario, paper_scale
+):
     """Forward-mode derivative of the chute downrange error with respect to the four
     second-entry feedback gains vs central differences at two steps.
 
@@ -107,7 +110,13 @@ def test_downrange_gradient_wrt_tracking_gains_matches_finite_differences(capsul
     a run where a reversal moves by a control step inside the difference interval has a
     difference quotient that depends on the step. Such runs are recognised by their two
     difference quotients disagreeing and skipped; the derivative must match on the others,
-    and most runs must qualify."""
+    and most runs must qualify.
+
+    All four gains through the full flight take two minutes to compile; in CI the family test
+    (``test_gradient_of_a_tunable_leaf_matches_central_differences[capsule-skip_entry]``) is
+    the reduced version (one gain), so this one runs with --paper-scale."""
+    if not paper_scale:
+        pytest.skip("paper scale only (--paper-scale); in CI the family gradient test covers it")
     import equinox as eqx
 
     from gnc_jax.simulation.capsule import simulate
