@@ -102,22 +102,43 @@ def main(argv=None):
             print(res["markdown"], flush=True)
             print(f"({res['seconds']:.0f} s, peak memory {res['peak_rss_mb']:.0f} MB)", flush=True)
     doc = dict(machine=machine, commit=commit, quick=args.quick, date=time.strftime("%Y-%m-%d"))
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(dict(doc, results=results), indent=1, default=float))
+    for res in results.values():
+        res.update(machine=machine, commit=commit, quick=args.quick, date=doc["date"])
+    out = Path(args.out)
+    if args.only and out.is_file():  # a subset: the other modules keep their last results
+        try:
+            earlier = json.loads(out.read_text()).get("results", {})
+        except ValueError:
+            earlier = {}
+        results = {n: results.get(n) or earlier[n] for n in SUITE if n in results or n in earlier}
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(dict(doc, results=results), indent=1, default=float))
     md = [
         f"# Benchmark results\n\nMachine: {machine}. Commit {commit}, {doc['date']}"
         + (" (quick sizes)." if args.quick else ".")
-        + " Written by `python -m benchmarks`.\n"
+        + " Written by `python -m benchmarks`"
+        + (
+            f" (this run: {args.only}; other sections say when they were measured)."
+            if args.only
+            else "."
+        )
+        + "\n"
     ]
     for name, res in results.items():
         md.append(f"## {res.get('title', name)}\n")
+        if res.get("commit") and name not in names:
+            md.append(
+                f"Measured earlier: commit {res['commit']}, {res.get('date', '?')}"
+                + (" (quick sizes)" if res.get("quick") else "")
+                + ".\n"
+            )
         if res.get("skipped"):
             md.append(f"Skipped: {res['skipped']}\n")
             continue
         md.append(res["markdown"] + "\n")
         md += [f"- {n}" for n in res.get("notes", [])]
         md.append(f"\n({res['seconds']:.0f} s; peak memory {res['peak_rss_mb']:.0f} MB)\n")
-    (Path(args.out).parent / "RESULTS.md").write_text("\n".join(md))
+    (out.parent / "RESULTS.md").write_text("\n".join(md))
     print(f"wrote {args.out} and RESULTS.md", flush=True)
 
 

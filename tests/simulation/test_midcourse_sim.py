@@ -19,14 +19,15 @@ METHODS = {
     "central_difference": "phoenix-midcourse-cd",
     "stm": "phoenix-midcourse-stm",
 }
-CI_RUNS = 6  # every test below that runs the default scenario uses this count: one compile
+CI_RUNS = 4  # every test below that runs the default scenario uses this count (and the family
+# tests theirs, 4 on two devices): one compilation, shared through the session's XLA cache
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("method", list(METHODS))
 def test_single_correction_meets_the_goal_with_each_sensitivity(method, paper_scale):
     """Acceptance: 100 runs (289 km, 0.577 m/s per axis), one correction at E-238 d, |ΔB| <
-    10 km and |Δt| < 60 s in >= 99 runs (CI: 6 runs, all)."""
+    10 km and |Δt| < 60 s in >= 99 runs (CI: 4 runs, all)."""
     runs = 100 if paper_scale else CI_RUNS
     scenario = gj.load_scenario(METHODS[method])
     assert scenario["guidance.autonomous.sensitivity"] == method
@@ -44,7 +45,7 @@ def test_single_correction_meets_the_goal_with_each_sensitivity(method, paper_sc
 def test_vmapped_study_equals_per_run_loop():
     scenario = gj.load_scenario("phoenix-midcourse")
     study = gj.run_study(scenario, runs=CI_RUNS, seed=0, progress=False)
-    for i in (0, 3, 5):
+    for i in (0, 2, 3):
         one, trace = gj.simulate_one(scenario, index=i, seed=0, record=True)
         # Batched and single programs round differently; adaptive steps and Newton amplify
         # that to millimetres on the (tens of metres) residual miss.
