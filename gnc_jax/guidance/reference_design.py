@@ -32,6 +32,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
+from tqdm.auto import tqdm
 
 from .._types import Array, Float, Scalar
 from ..dynamics.entry import EntryState
@@ -397,8 +398,11 @@ def design(
     learning_rate=0.05,
     init=PROFILE_INIT_RAD,
     sigma_1_guess=SIGMA_1_GUESS_RAD,
+    callback=None,
 ):
-    """Optimise (sigma_a, sigma_b); returns the design (radians) and the objective history."""
+    """Optimise (sigma_a, sigma_b); returns the design (radians) and the objective history.
+
+    ``callback(step, objective)``, if given, is called after each optimiser step (progress)."""
     v_switch = jnp.asarray(V_SWITCH_INIT_MPS)
 
     @jax.jit
@@ -421,6 +425,8 @@ def design(
     for _ in range(steps):
         (value, (s1, vs)), g = grad(theta, v_switch, guess)
         history.append(float(value))
+        if callback is not None:
+            callback(len(history), history[-1])
         updates, state = opt.update(g, state)
         theta = jnp.clip(optax.apply_updates(theta, updates), *PROFILE_BOUNDS_RAD)
         # anchor the profile at the switch speed the design actually produces
@@ -679,10 +685,23 @@ def reference_for(problem: NominalProblem, description: dict, **design_kwargs):
             file=sys.stderr,
             flush=True,
         )
-        require_reachable(problem, entry, vehicle, design_kwargs.get("sigma_1_guess"))
-        d = design(problem, **design_kwargs)
-        require_design(problem, d, entry, vehicle)
-        ref = tabulate_reference(problem, d)
+        steps = design_kwargs.get("steps", 20)
+        # stages: the reach check, the optimiser's steps, the tabulation; the first of each
+        # compiles, so the bar's rate is only a rough guide
+        with tqdm(total=steps + 2, desc="reference design", unit="stage", file=sys.stderr) as bar:
+            bar.set_postfix_str("reach check")
+            require_reachable(problem, entry, vehicle, design_kwargs.get("sigma_1_guess"))
+            bar.update()
+
+            def stepped(step, objective):
+                bar.set_postfix_str(f"step {step}/{steps}, objective {objective:.4g}")
+                bar.update()
+
+            d = design(problem, callback=stepped, **design_kwargs)
+            require_design(problem, d, entry, vehicle)
+            bar.set_postfix_str("tabulating the reference")
+            ref = tabulate_reference(problem, d)
+            bar.update()
         data = {f: np.asarray(getattr(ref, f)) for f in ReferenceTrajectory.__dataclass_fields__}
         data["objective_history"] = np.asarray(d.objective_history)
         try:
