@@ -107,9 +107,13 @@ def main(argv=None):
     out = Path(args.out)
     if args.only and out.is_file():  # a subset: the other modules keep their last results
         try:
-            earlier = json.loads(out.read_text()).get("results", {})
+            old = json.loads(out.read_text())
         except ValueError:
-            earlier = {}
+            old = {}
+        earlier = old.get("results", {})
+        for res in earlier.values():  # results written before sections carried their own
+            for k in ("machine", "commit", "quick", "date"):
+                res.setdefault(k, old.get(k))
         results = {n: results.get(n) or earlier[n] for n in SUITE if n in results or n in earlier}
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(dict(doc, results=results), indent=1, default=float))
