@@ -14,6 +14,11 @@ noise of equal variance on both axes. Three facts of this model make it cheap pe
   P <- P - (P h^T)(P h^T)^T / s, no matrix inverse. The second scalar keeps the first's
   linearisation point: its innovation is corrected by h_2 (x_1 - x_0).
 
+A planar intercept carries the in-plane 10 of the 21 entries (``pack(p, PLANAR)``): its
+out-of-plane entries start uncorrelated with the rest, straight-line propagation and the in-plane
+angle's update keep them so, and nothing reads them; the in-plane results are bit for bit
+those of the 21 entries (measured: `bennu-apn` 6 % faster, 104 -> 85 kernels per step).
+
 ``navigation.ekf.ekf_update`` (dense, any measurement) is the reference the tests hold this to.
 """
 
@@ -25,10 +30,23 @@ from .._types import Array, Covariance6, Float, Scalar, Vector3
 from .ekf import _S_FLOOR, _symmetric
 
 N_STATE = 6
-_INDEX = {}
-for _i in range(N_STATE):
-    for _j in range(_i, N_STATE):
-        _INDEX[(_i, _j)] = len(_INDEX)
+FULL = (0, 1, 2)
+PLANAR = (0, 1)
+"""Position axes a packed covariance carries: all three, or the orbit plane's x and y (a planar
+intercept, whose out-of-plane entries are decoupled from the rest and read by nothing)."""
+
+
+def _pairs(axes: tuple) -> dict:
+    states = tuple(axes) + tuple(a + 3 for a in axes)
+    index = {}
+    for n, i in enumerate(states):
+        for j in states[n:]:
+            index[(i, j)] = len(index)
+    return index
+
+
+_INDEX = _pairs(FULL)
+_INDEXES = {len(_INDEX): (FULL, _INDEX), len(_pairs(PLANAR)): (PLANAR, _pairs(PLANAR))}
 
 
 def packed_index(i: int, j: int) -> int:
@@ -37,24 +55,41 @@ def packed_index(i: int, j: int) -> int:
 
 
 class PackedCovariance(NamedTuple):
-    """The 21 unique entries of a 6x6 covariance: ``entries[packed_index(i, j)]`` = P[i, j]."""
+    """The unique entries of a 6x6 covariance: ``entries[packed_index(i, j)]`` = P[i, j] (21
+    entries), or of its in-plane part (10 entries: axes x, y and their velocities, in that
+    order); an entry of an axis not carried reads as 0."""
 
     entries: tuple
 
+    @property
+    def axes(self) -> tuple:
+        return _INDEXES[len(self.entries)][0]
+
+    @property
+    def index(self) -> dict:
+        return _INDEXES[len(self.entries)][1]
+
+    @property
+    def states(self) -> tuple:
+        return tuple(self.axes) + tuple(a + 3 for a in self.axes)
+
     def __getitem__(self, ij) -> Scalar:  # P[i, j] for a pair of Python ints
         if isinstance(ij, tuple):
-            return self.entries[packed_index(*ij)]
+            n = self.index.get((min(ij), max(ij)))
+            return 0.0 if n is None else self.entries[n]
         return tuple.__getitem__(self, ij)
 
 
-def pack(p: Covariance6) -> PackedCovariance:
-    """The packed form of a symmetric 6x6 matrix (its upper triangle)."""
-    return PackedCovariance(tuple(p[i, j] for (i, j) in _INDEX))
+def pack(p: Covariance6, axes: tuple = FULL) -> PackedCovariance:
+    """The packed form of a symmetric 6x6 matrix (its upper triangle), of the position
+    ``axes`` given (``PLANAR``: drop the out-of-plane entries, which must be decoupled)."""
+    return PackedCovariance(tuple(p[i, j] for (i, j) in _pairs(axes)))
 
 
 def unpack(pk: PackedCovariance) -> Covariance6:
-    """The symmetric 6x6 matrix of a packed covariance."""
-    return _symmetric(lambda i, j: pk[i, j], N_STATE)
+    """The symmetric 6x6 matrix of a packed covariance (zero where an axis is not carried)."""
+    zero = jnp.zeros_like(pk.entries[0])
+    return _symmetric(lambda i, j: zero if (i, j) not in pk.index else pk[i, j], N_STATE)
 
 
 def propagate_packed(pk: PackedCovariance, dt, q_accel) -> PackedCovariance:
@@ -66,7 +101,7 @@ def propagate_packed(pk: PackedCovariance, dt, q_accel) -> PackedCovariance:
     """
     q_rr, q_rv, q_vv = q_accel * dt**3 / 3.0, q_accel * dt**2 / 2.0, q_accel * dt
     out = []
-    for i, j in _INDEX:
+    for i, j in pk.index:
         if j < 3:  # both position
             v = pk[i, j] + dt * (pk[i, j + 3] + pk[i + 3, j]) + dt * dt * pk[i + 3, j + 3]
             v = v + q_rr if i == j else v
@@ -111,20 +146,24 @@ def los_gain(
     :func:`apply_gain` (an elementwise pass over the 21 entries). When ``valid`` is false (a
     rejected image) the gain is zero: the prior is kept.
     """
+    axes, states = pk.axes, pk.states  # u, w: one entry per state carried, in this order
     terms, dr, dv = [], jnp.zeros(3), jnp.zeros(3)
+    dot = lambda x, h: sum(x[n] * h[k] for n, k in enumerate(axes))  # noqa: E731
     for a in range(angles):
         h = h_r[a]
-        u = [sum(pk[i, k] * h[k] for k in range(1, 3)) + pk[i, 0] * h[0] for i in range(6)]
+        u = [dot([pk[i, k] for k in axes], h) for i in states]
         for w_prev, u_prev in terms:  # the rows already applied: P_a = P_0 - sum w u^T
-            c = u_prev[0] * h[0] + u_prev[1] * h[1] + u_prev[2] * h[2]
+            c = dot(u_prev, h)
             u = [ui - wi * c for ui, wi in zip(u, w_prev)]
         # the floor of ekf_update: a certain filter (P = 0) of a noiseless measurement gains 0
-        s = h[0] * u[0] + h[1] * u[1] + h[2] * u[2] + r_var + _S_FLOOR
+        s = dot(u, h) + r_var + _S_FLOOR
         inv_s = 1.0 / s
-        nu = innovation[a] - (h[0] * dr[0] + h[1] * dr[1] + h[2] * dr[2])
+        nu = innovation[a] - sum(h[k] * dr[k] for k in axes)
         gain = nu * inv_s
-        dr = dr + jnp.stack([u[0] * gain, u[1] * gain, u[2] * gain])
-        dv = dv + jnp.stack([u[3] * gain, u[4] * gain, u[5] * gain])
+        zero = jnp.zeros_like(gain)
+        full = {i: ui * gain for i, ui in zip(states, u)}
+        dr = dr + jnp.stack([full.get(k, zero) for k in range(3)])
+        dv = dv + jnp.stack([full.get(k + 3, zero) for k in range(3)])
         terms.append((tuple(ui * inv_s for ui in u), tuple(u)))
     if valid is not True:
         keep = lambda a: jnp.where(valid, a, jnp.zeros_like(a))  # noqa: E731
@@ -135,11 +174,12 @@ def los_gain(
 
 def apply_gain(pk: PackedCovariance, terms: tuple) -> PackedCovariance:
     """P - sum w u^T over the (w, u) terms of :func:`los_gain`, entry by entry."""
+    position = {i: n for n, i in enumerate(pk.states)}  # a state's place in w and u
     out = []
-    for i, j in _INDEX:
+    for i, j in pk.index:
         p_ij = pk[i, j]
         for w, u in terms:
-            p_ij = p_ij - w[i] * u[j]
+            p_ij = p_ij - w[position[i]] * u[position[j]]
         out.append(p_ij)
     return PackedCovariance(tuple(out))
 
@@ -168,6 +208,8 @@ def los_update(
 
 
 __all__ = [
+    "FULL",
+    "PLANAR",
     "PackedCovariance",
     "los_update",
     "pack",

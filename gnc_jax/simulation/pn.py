@@ -58,6 +58,8 @@ from ..navigation.camera import camera_attitude
 from ..navigation.ekf import MeasurementPrediction, NavEstimate
 from ..navigation.measurements import AbstractMeasurement, Exposure, GaussianLOSMeasurement
 from ..navigation.packed_ekf import (
+    FULL,
+    PLANAR,
     PackedCovariance,
     apply_gain,
     los_gain,
@@ -171,7 +173,7 @@ class _Carry(NamedTuple):
     truth: InterceptState
     r_hat: Vector3
     v_hat: Vector3
-    p: PackedCovariance  # the 21 unique entries of the 6x6 covariance
+    p: PackedCovariance  # the 21 unique entries of the 6x6 covariance (10 when planar)
     law_state: tuple
     on_prev: Scalar
     direction_prev: Vector3
@@ -440,7 +442,7 @@ def simulate(
         truth=sim.y0,
         r_hat=nav0.r,
         v_hat=nav0.v,
-        p=pack(nav0.p),
+        p=pack(nav0.p, PLANAR if sim.planar else FULL),
         law_state=law.init(None, sim.context),
         on_prev=z,
         direction_prev=jnp.zeros(3),

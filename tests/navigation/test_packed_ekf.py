@@ -9,6 +9,7 @@ import pytest
 from gnc_jax.navigation.camera import camera_attitude
 from gnc_jax.navigation.ekf import NavEstimate, ekf_update, predict_los, propagate_covariance
 from gnc_jax.navigation.packed_ekf import (
+    PLANAR,
     los_update,
     pack,
     packed_index,
@@ -104,6 +105,29 @@ def test_planar_first_angle_only_leaves_the_in_plane_block_as_the_joint_update()
     p1, p_ref = np.asarray(unpack(pk)), np.asarray(ref.p)
     blk = np.ix_(in_plane, in_plane)
     np.testing.assert_allclose(p1[blk], p_ref[blk], rtol=1e-10, atol=1e-10 * np.abs(p_ref).max())
+
+
+def test_planar_packing_carries_the_in_plane_entries_only_and_updates_them_identically():
+    """``pack(p, PLANAR)`` (10 entries, the planar intercept's form): the in-plane update and
+    propagation equal the full packed filter's bit for bit (the dropped out-of-plane entries
+    enter the full one only as exact zeros), the out-of-plane entries read as 0."""
+    rng = np.random.default_rng(11)
+    r, v, p = _case(rng, planar=True)
+    nav = NavEstimate(jnp.asarray(np.concatenate([r, v])), jnp.asarray(p))
+    c = camera_attitude(jnp.asarray(-r), jnp.array([0.0, 0, 1]))
+    sigma = 3.2e-4
+    pred = predict_los(nav, c, sigma**2 * jnp.eye(2))
+    innov = pred.z * 0.0 + jnp.asarray([2e-4, 0.0])
+    h_r = pred.jacobian[:, :3]
+    full = los_update(nav.r, nav.v, pack(nav.p), h_r, innov, sigma**2, angles=1)
+    planar = los_update(nav.r, nav.v, pack(nav.p, PLANAR), h_r, innov, sigma**2, angles=1)
+    assert len(planar[2].entries) == 10 and planar[2][2, 0] == 0.0
+    in_plane = np.ix_([0, 1, 3, 4], [0, 1, 3, 4])
+    for a, b in zip(full[:2], planar[:2]):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    pf, pp = (np.asarray(unpack(propagate_packed(x[2], 1.0, 1e-9))) for x in (full, planar))
+    np.testing.assert_array_equal(pf[in_plane], pp[in_plane])
+    assert np.all(pp[2] == 0.0) and np.all(pp[:, 5] == 0.0)
 
 
 def test_rejected_image_and_certain_filter():
