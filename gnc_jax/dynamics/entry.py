@@ -474,16 +474,23 @@ class BankActuator(eqx.Module):
     """Roll of the bank angle with finite rate and acceleration (reaction-control limits).
 
     Defaults: 20 deg/s and 10 deg/s^2, typical of the Apollo/Orion reaction control system in
-    roll (a 180 deg reversal then takes about 11 s). Angles are not wrapped: a command is reached
-    by the straight path in sigma, so a reversal from +60 deg to -60 deg rolls through lift-up.
+    roll (a 180 deg reversal then takes about 11 s). With ``shortest`` (the default) a command
+    is reached by the shorter way round, so a reversal keeps the sign of the vertical lift: from
+    +60 deg to -60 deg it rolls through lift-up, from +120 deg to -120 deg through lift-down
+    (the angle flown is kept in (-180, 180] deg). Without it a command is reached by the
+    straight path in sigma, so every reversal rolls through lift-up: measured, at a -5.6 deg
+    entry the lift-down reversals' lift-up pulses loft the capsule out of the atmosphere in 5
+    of 256 runs (tests/test_reliability_capsule.py).
 
     Attributes:
         max_rate: rad/s.
         max_acceleration: rad/s^2.
+        shortest: roll the shorter way round (static).
     """
 
     max_rate: Scalar = eqx.field(default=math.radians(20.0), converter=jnp.asarray)
     max_acceleration: Scalar = eqx.field(default=math.radians(10.0), converter=jnp.asarray)
+    shortest: bool = eqx.field(default=True, static=True)
 
     def init(self, bank: Scalar) -> BankActuatorState:
         """At rest at ``bank`` (rad)."""
@@ -500,10 +507,16 @@ class BankActuator(eqx.Module):
         |delta sigma_dot| <= a_max dt hold exactly at every step.
         """
         error = command - state.bank
+        if self.shortest:  # into [-pi, pi): the shorter way round
+            error = jnp.remainder(error + math.pi, 2.0 * math.pi) - math.pi
         # The floor keeps the gradient of sqrt finite when the command is reached (error 0).
         braking = jnp.sqrt(jnp.maximum(2.0 * self.max_acceleration * jnp.abs(error), 1e-30))
         reachable = jnp.minimum(braking, jnp.abs(error) / dt)
         target_rate = jnp.sign(error) * jnp.minimum(self.max_rate, reachable)
         max_change = self.max_acceleration * dt
         rate = state.bank_rate + jnp.clip(target_rate - state.bank_rate, -max_change, max_change)
-        return BankActuatorState(state.bank + rate * dt, rate)
+        bank = state.bank + rate * dt
+        if self.shortest:  # the angle flown in (-pi, pi]
+            bank = jnp.where(bank > math.pi, bank - 2.0 * math.pi, bank)
+            bank = jnp.where(bank <= -math.pi, bank + 2.0 * math.pi, bank)
+        return BankActuatorState(bank, rate)

@@ -181,7 +181,7 @@ class SkipEntryState(NamedTuple):
 
     Attributes:
         phase: 0 hold, 1 predictor-corrector, 2 Kepler, 3 tracking.
-        pulled_up: Ḣ has been positive since guidance started.
+        pulled_up: Ḣ has exceeded ``pull_up_hdot_mps`` since guidance started.
         sigma_0: corrector solution, rad (start of the first-entry profile).
         sign: sign of the bank (+1 right, -1 left), flipped by the reversals.
         bank_mag: bank magnitude commanded last, rad (held through the Kepler phase).
@@ -310,6 +310,17 @@ class SkipEntryGuidance(AbstractEntryGuidance):
     )
     kepler_load_g: Scalar = param(
         0.2, lo=0.0, lo_open=True, hi=5.0, units="g", doc="Kepler-phase load threshold"
+    )
+    pull_up_hdot_mps: Scalar = param(
+        10.0,
+        lo=0.0,
+        hi=1000.0,
+        units="m/s",
+        doc="climb rate that declares the pull-up, and sink rate that then declares the "
+        "second entry (law and predictor): a vehicle levelling off at the bottom of the "
+        "first dip (Hdot within a few m/s of 0, e.g. during a bank reversal) has neither "
+        "pulled up nor begun its second entry (with 0: at a -5.6 deg entry 4 of 256 runs "
+        "switched to tracking at the bottom of the dip and skipped out)",
     )
     bracket_step_rad: Scalar = param(
         5.0,
@@ -571,9 +582,9 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         alt1, speed1, hdot1 = altitude_speed_hdot(y1, model.earth)
         density1 = model.atmosphere.density(alt1)
         ng1 = model.load_g_xyz(density1, speed1)
-        pulled = c.pulled_up | (hdot1 > 0.0)
+        pulled = c.pulled_up | (hdot1 > self.pull_up_hdot_mps)
         kepler = c.kepler | (pulled & (ng1 < self.kepler_load_g))
-        descending = pulled & (hdot1 < 0.0) & (ng1 >= self.kepler_load_g)
+        descending = pulled & (hdot1 < -self.pull_up_hdot_mps) & (ng1 >= self.kepler_load_g)
         switch = kepler & descending
         second = c.second | (~kepler & descending)
         chute = alt1 < self.chute_altitude_m
@@ -844,14 +855,14 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         phase = state.phase
         start = live & (phase == 0) & (ng > self.ng0_g)
         phase = jnp.where(start, 1, phase)
-        pulled = state.pulled_up | ((phase >= 1) & (fv.hdot_mps > 0.0))
+        pulled = state.pulled_up | ((phase >= 1) & (fv.hdot_mps > self.pull_up_hdot_mps))
         to_kepler = live & (phase == 1) & pulled & (fv.hdot_mps > 0.0) & (ng < self.kepler_load_g)
         phase = jnp.where(to_kepler, 2, phase)
         to_track = (
             live
             & ((phase == 1) | (phase == 2))
             & pulled
-            & (fv.hdot_mps < 0.0)
+            & (fv.hdot_mps < -self.pull_up_hdot_mps)
             & (ng >= self.kepler_load_g)
         )
         phase = jnp.where(to_track, 3, phase)

@@ -80,6 +80,13 @@ SCHEMA = {
     "actuator": {
         "max_rate_dps": F("float", 20.0, lo=0.0, lo_open=True, hi=360.0, units="deg/s"),
         "max_accel_dps2": F("float", 10.0, lo=0.0, lo_open=True, hi=3600.0, units="deg/s^2"),
+        "reversal": F(
+            "str",
+            "shortest",
+            choices=("shortest", "through_lift_up"),
+            doc="way round of a bank reversal: the shorter one (keeps the sign of the vertical "
+            "lift: a lift-down bank reverses through lift-down) or always through lift-up",
+        ),
     },
     "guidance": {
         "hold_bank_deg": F("float", 60.0, lo=0.0, hi=180.0, units="deg"),

@@ -609,7 +609,9 @@ def build(scenario) -> CapsuleSimulation:
         earth=earth,
         atmosphere=atmosphere,
         actuator=BankActuator(
-            max_rate=rad(act["max_rate_dps"]), max_acceleration=rad(act["max_accel_dps2"])
+            max_rate=rad(act["max_rate_dps"]),
+            max_acceleration=rad(act["max_accel_dps2"]),
+            shortest=act["reversal"] == "shortest",
         ),
         dispersions=from_scenario(CapsuleDispersions, cfg),
         target_fixed=target,
