@@ -52,16 +52,25 @@ from .entry_common import (
 from .skip_entry import ReferenceTrajectory
 
 #: bump when the design procedure changes, so that cached references are redesigned
-REFERENCE_VERSION = 3
+REFERENCE_VERSION = 4
 
 # The first-entry bank search of the design (solve_first_entry_bank): bounds, bracketing step
 # and steps (eq. 15), the first guess, and the second-entry profile the design starts from.
-SIGMA_1_BOUNDS_RAD = (math.radians(40.0), math.radians(140.0))
+# The first-entry bounds leave the corrector 15 deg of bank either side: the skip's range is
+# steep in the first-entry bank, so a little authority covers the dispersions, and 40..140 deg
+# (before) refused steep entries inside the reachable footprint (-7.1 deg: 1198..3785 km of a
+# constant-bank footprint of 824..10 083 km).
+SIGMA_1_BOUNDS_RAD = (math.radians(15.0), math.radians(165.0))
 SIGMA_1_STEP_RAD = math.radians(2.0)
 SIGMA_1_BRACKET_STEPS = 12
 SIGMA_1_GUESS_RAD = 1.2915  # 74 deg
 PROFILE_INIT_RAD = (1.0472, 1.0472)  # 60 deg
-PROFILE_BOUNDS_RAD = (math.radians(5.0), math.radians(175.0))  # of (sigma_a, sigma_b)
+# The second-entry profile keeps cos(sigma) within 0.71 of full lift: the tracking law divides
+# the reference's cos(sigma) by the measured L/D ratio, and a 3-sigma low L/D (cl -20 %, cd
+# +20 %: x0.67-0.72) must still find lift before track_bank_min_deg (15 deg). With 5..175 deg
+# (before) the design settled at 18-20 deg off the nominal point, and the low-L/D runs
+# undershot by up to 90 km (-6.8 deg, 4000 km).
+PROFILE_BOUNDS_RAD = (math.radians(45.0), math.radians(135.0))  # of (sigma_a, sigma_b)
 V_SWITCH_INIT_MPS = 7300.0
 RANGE_TOLERANCE_M = 1.0  # of the first-entry bank solve
 DESIGN_MISS_LIMIT_M = 1.0e3  # a designed nominal farther from the target did not converge
