@@ -72,6 +72,12 @@ def test_entry_above_the_skip_out_altitude_is_refused(paper):
     assert _one_line(e).startswith("guidance.skip_entry.skip_out_altitude_km: 140 km")
 
 
+def _design_banks_deg(step_deg):
+    """The design's first-entry banks (its bounds) every ``step_deg``."""
+    lo, hi = np.degrees(rd.SIGMA_1_BOUNDS_RAD)
+    return np.arange(lo, hi + 0.01, step_deg)
+
+
 def _landed_ranges_km(problem, range_km, sigma_1_deg, sigma_2_deg):
     """Brute force: chute range (km, along the entry -> target track) of every nominal on a
     grid of constant first- and second-entry banks that skips and lands (NaN otherwise)."""
@@ -98,7 +104,7 @@ def test_unreachable_range_is_refused_before_the_design_with_the_reachable_inter
     # a brute-force grid of the design's banks (0.5 deg first entry) lands inside the quoted
     # interval and never near the refused range
     landed = _landed_ranges_km(
-        _problem(scenario), 14000.0, np.arange(40.0, 140.01, 0.5), [5.0, 60.0, 175.0]
+        _problem(scenario), 14000.0, _design_banks_deg(0.5), np.degrees(rd._profile_banks())
     )
     landed = landed[np.isfinite(landed)]
     assert landed.size > 0
@@ -116,13 +122,13 @@ def test_uncaptured_entry_angle_is_refused_before_the_design_with_the_corridor(p
     shallow, steep = (float(x) for x in text.split("allowed: ")[1].split(" deg")[0].split(" .. "))
     assert steep < shallow < -4.5
     landed = _landed_ranges_km(
-        _problem(scenario), 8000.0, np.arange(40.0, 140.01, 2.0), [5.0, 60.0, 175.0]
+        _problem(scenario), 8000.0, _design_banks_deg(2.0), np.degrees(rd._profile_banks())
     )
     assert not np.isfinite(landed).any()  # brute force: nothing skips and lands
     # and the shallow end of the quoted corridor does
     inside = paper.with_overrides([f"entry.fpa_deg={shallow}"])
     landed = _landed_ranges_km(
-        _problem(inside), 8000.0, np.arange(40.0, 140.01, 2.0), [5.0, 60.0, 175.0]
+        _problem(inside), 8000.0, _design_banks_deg(2.0), np.degrees(rd._profile_banks())
     )
     assert np.isfinite(landed).any()
 

@@ -52,16 +52,25 @@ from .entry_common import (
 from .skip_entry import ReferenceTrajectory
 
 #: bump when the design procedure changes, so that cached references are redesigned
-REFERENCE_VERSION = 3
+REFERENCE_VERSION = 4
 
 # The first-entry bank search of the design (solve_first_entry_bank): bounds, bracketing step
 # and steps (eq. 15), the first guess, and the second-entry profile the design starts from.
-SIGMA_1_BOUNDS_RAD = (math.radians(40.0), math.radians(140.0))
+# The first-entry bounds leave the corrector 15 deg of bank either side: the skip's range is
+# steep in the first-entry bank, so a little authority covers the dispersions, and 40..140 deg
+# (before) refused steep entries inside the reachable footprint (-7.1 deg: 1198..3785 km of a
+# constant-bank footprint of 824..10 083 km).
+SIGMA_1_BOUNDS_RAD = (math.radians(15.0), math.radians(165.0))
 SIGMA_1_STEP_RAD = math.radians(2.0)
 SIGMA_1_BRACKET_STEPS = 12
 SIGMA_1_GUESS_RAD = 1.2915  # 74 deg
 PROFILE_INIT_RAD = (1.0472, 1.0472)  # 60 deg
-PROFILE_BOUNDS_RAD = (math.radians(5.0), math.radians(175.0))  # of (sigma_a, sigma_b)
+# The second-entry profile keeps cos(sigma) within 0.71 of full lift: the tracking law divides
+# the reference's cos(sigma) by the measured L/D ratio, and a 3-sigma low L/D (cl -20 %, cd
+# +20 %: x0.67-0.72) must still find lift before track_bank_min_deg (15 deg). With 5..175 deg
+# (before) the design settled at 18-20 deg off the nominal point, and the low-L/D runs
+# undershot by up to 90 km (-6.8 deg, 4000 km).
+PROFILE_BOUNDS_RAD = (math.radians(45.0), math.radians(135.0))  # of (sigma_a, sigma_b)
 V_SWITCH_INIT_MPS = 7300.0
 RANGE_TOLERANCE_M = 1.0  # of the first-entry bank solve
 DESIGN_MISS_LIMIT_M = 1.0e3  # a designed nominal farther from the target did not converge
@@ -366,7 +375,7 @@ def require_reachable(problem: NominalProblem, entry: dict, vehicle: dict, guess
 def require_design(problem: NominalProblem, d: "DesignResult", entry: dict, vehicle: dict):
     """Refuse (:class:`ScenarioError`, naming ``entry.range_km``) a finished design whose
     nominal does not skip and put the chute on the target: its solve did not converge."""
-    flight = fly_nominal(problem, d.sigma_1, d.sigma_a, d.sigma_b, d.v_switch)
+    flight = _fly_nominal(problem, d.sigma_1, d.sigma_a, d.sigma_b, d.v_switch)
     err_m = float(range_error_m(problem, flight))
     fate = int(_fate(flight))
     if fate != SKIP_LANDS or not abs(err_m) <= DESIGN_MISS_LIMIT_M:
@@ -391,6 +400,25 @@ class DesignResult(NamedTuple):
     objective_history: list
 
 
+def _design_objective(problem: NominalProblem, theta, v_switch, guess, w_margin):
+    """J = N_g2 + w_margin * smooth max of the bank cosines, with (sigma_1, switch speed)."""
+    s1 = solve_first_entry_bank(problem, theta[0], theta[1], v_switch, guess)
+    fl = fly_nominal(problem, s1, theta[0], theta[1], v_switch)
+    cosines = jnp.abs(jnp.cos(jnp.stack([s1, theta[0], theta[1]])))
+    margin = jnp.log(jnp.sum(jnp.exp(20.0 * cosines))) / 20.0
+    return fl.peak2 + w_margin * margin, (
+        s1,
+        flight_variables(fl.switch, problem.model.earth).speed_mps,
+    )
+
+
+# The design's compiled steps take the problem as an argument (not a closure), so that every
+# design after the first of a process reuses them: compilation was about 45 s of each design.
+_design_value_and_grad = jax.jit(jax.value_and_grad(_design_objective, argnums=1, has_aux=True))
+_solve_first_entry_bank = jax.jit(solve_first_entry_bank)
+_fly_nominal = jax.jit(fly_nominal)
+
+
 def design(
     problem: NominalProblem,
     w_margin=2.0,
@@ -404,26 +432,14 @@ def design(
 
     ``callback(step, objective)``, if given, is called after each optimiser step (progress)."""
     v_switch = jnp.asarray(V_SWITCH_INIT_MPS)
-
-    @jax.jit
-    def objective(theta, v_switch, guess):
-        s1 = solve_first_entry_bank(problem, theta[0], theta[1], v_switch, guess)
-        fl = fly_nominal(problem, s1, theta[0], theta[1], v_switch)
-        cosines = jnp.abs(jnp.cos(jnp.stack([s1, theta[0], theta[1]])))
-        margin = jnp.log(jnp.sum(jnp.exp(20.0 * cosines))) / 20.0
-        return fl.peak2 + w_margin * margin, (
-            s1,
-            flight_variables(fl.switch, problem.model.earth).speed_mps,
-        )
-
-    grad = jax.jit(jax.value_and_grad(objective, has_aux=True))
+    w = jnp.asarray(w_margin, dtype=jnp.float64)
     theta = jnp.asarray(init)
     opt = optax.adam(learning_rate)
     state = opt.init(theta)
     history = []
     guess = jnp.asarray(sigma_1_guess)
     for _ in range(steps):
-        (value, (s1, vs)), g = grad(theta, v_switch, guess)
+        (value, (s1, vs)), g = _design_value_and_grad(problem, theta, v_switch, guess, w)
         history.append(float(value))
         if callback is not None:
             callback(len(history), history[-1])
@@ -431,7 +447,7 @@ def design(
         theta = jnp.clip(optax.apply_updates(theta, updates), *PROFILE_BOUNDS_RAD)
         # anchor the profile at the switch speed the design actually produces
         v_switch, guess = vs, s1
-    s1 = solve_first_entry_bank(problem, theta[0], theta[1], v_switch, guess)
+    s1 = _solve_first_entry_bank(problem, theta[0], theta[1], v_switch, guess)
     return DesignResult(float(s1), float(theta[0]), float(theta[1]), float(v_switch), history)
 
 
@@ -504,15 +520,15 @@ class _SecondEntryRecord(NamedTuple):
     n: int  # points above the chute altitude
 
 
-def _record_second_entry(problem: NominalProblem, d: DesignResult, fl) -> _SecondEntryRecord:
-    """Fly the designed second entry from the switch point and record it step by step."""
+@jax.jit
+def _second_entry_steps(problem: NominalProblem, switch, t_sw, sigma_a, sigma_b, v_switch):
+    """The designed second entry flown from the switch point at 1 s steps (1200 of them)."""
     m, earth = problem.model, problem.model.earth
-    switch, t_sw = fl.switch, fl.t_switch
 
     def body(c, _):
         y, t = c
         fv = flight_variables(y, earth)
-        bank = reference_bank(d.sigma_a, d.sigma_b, d.v_switch, problem.v_end_mps, fv.speed_mps)
+        bank = reference_bank(sigma_a, sigma_b, v_switch, problem.v_end_mps, fv.speed_mps)
         f = lambda t, y, a: m.vertical_plane_field(t, y, a)  # noqa: E731
         y1 = rk4_step(f, t, y, 1.0, jnp.cos(bank))
         return (y1, t + 1.0), (
@@ -526,27 +542,60 @@ def _record_second_entry(problem: NominalProblem, d: DesignResult, fl) -> _Secon
             y.v,
         )
 
-    _, (r, t, speed, hdot, alt, bank, ngx, v) = jax.lax.scan(
-        body, (switch, t_sw), None, length=1200
-    )
+    return jax.lax.scan(body, (switch, t_sw), None, length=1200)[1]
+
+
+@jax.jit
+def _ranges_to(problem: NominalProblem, r, t, chute_r, chute_t):
+    """Ground range (m) from each recorded point ``(r[i], t[i])`` to the chute point."""
+    earth = problem.model.earth
+    return jax.vmap(lambda ri, ti: ground_range_m(ri, ti, chute_r, chute_t, earth))(r, t)
+
+
+def _record_second_entry(problem: NominalProblem, d: DesignResult, fl) -> _SecondEntryRecord:
+    """Fly the designed second entry from the switch point and record it step by step."""
     r, t, speed, hdot, alt, bank, ngx, v = (
-        np.asarray(x) for x in (r, t, speed, hdot, alt, bank, ngx, v)
+        np.asarray(x)
+        for x in _second_entry_steps(
+            problem, fl.switch, fl.t_switch, d.sigma_a, d.sigma_b, d.v_switch
+        )
     )
     above = alt >= float(problem.chute_altitude_m)
     n = int(np.argmin(above)) if not above.all() else len(alt)
-    chute_r, chute_t = np.asarray(fl.chute.r), float(fl.t_chute)
-    rng = np.array(
-        [
-            float(ground_range_m(jnp.asarray(r[i]), t[i], jnp.asarray(chute_r), chute_t, earth))
-            for i in range(n)
-        ]
-    )
+    rng = np.asarray(_ranges_to(problem, r[:n], t[:n], fl.chute.r, fl.t_chute))
     return _SecondEntryRecord(r, t, speed, hdot, alt, bank, ngx, v, rng, n)
+
+
+@jax.jit
+def _node_sensitivities(problem: NominalProblem, r, v, t, sigma_a, sigma_b, v_switch):
+    """d(second-entry range)/d(altitude, flight-path angle, uniform cos sigma) from each of the
+    states ``(r[i], v[i], t[i])``, by forward-mode autodiff (shape: nodes x 3)."""
+    earth = problem.model.earth
+
+    def range_from(ri, vi, ti, x):
+        y = perturb_switch_state(EntryState(ri, vi), earth, 0.0, x[1], x[0])
+        return second_entry_range(problem, y, ti, sigma_a, sigma_b, v_switch, 0.0, d_cos=x[2])
+
+    return jax.vmap(
+        lambda ri, vi, ti: jax.jacfwd(lambda x: range_from(ri, vi, ti, x))(jnp.zeros(3))
+    )(r, v, t)
+
+
+@jax.jit
+def _switch_partials(problem: NominalProblem, switch, t_sw, sigma_a, sigma_b, v_switch):
+    """d(second-entry range)/d(switch speed, flight-path angle, altitude, uniform bank)."""
+    earth = problem.model.earth
+
+    def s2(x):
+        y = perturb_switch_state(switch, earth, x[0], x[1], x[2])
+        return second_entry_range(problem, y, t_sw, sigma_a, sigma_b, v_switch, x[3])
+
+    return jax.jacfwd(s2)(jnp.zeros(4))
 
 
 def _tracking_sensitivities(problem: NominalProblem, d: DesignResult, rec, node_idx, chute_t):
     """(dR/dN_gx, dR/dḢ, dR/dcos sigma, time to go) at the table nodes ``node_idx``."""
-    m, earth = problem.model, problem.model.earth
+    m = problem.model
     r, v, t, alt, ngx = rec.r, rec.v, rec.t, rec.alt, rec.ngx
     speed, hdot = rec.speed, rec.hdot
 
@@ -554,17 +603,11 @@ def _tracking_sensitivities(problem: NominalProblem, d: DesignResult, rec, node_
     # d(range)/d(altitude), d(range)/d(flight-path angle) at fixed speed, and d(range)/d(cos
     # sigma) for a uniform change of cos(sigma) from that point on, all by forward-mode autodiff
     # through the remaining second entry.
-    def range_from(i_state, dh, dfpa, dcos):
-        y = EntryState(jnp.asarray(r)[i_state], jnp.asarray(v)[i_state])
-        y = perturb_switch_state(y, earth, 0.0, dfpa, dh)
-        return second_entry_range(
-            problem, y, jnp.asarray(t)[i_state], d.sigma_a, d.sigma_b, d.v_switch, 0.0, d_cos=dcos
+    sens = np.asarray(
+        _node_sensitivities(
+            problem, r[node_idx], v[node_idx], t[node_idx], d.sigma_a, d.sigma_b, d.v_switch
         )
-
-    sens = jax.jit(
-        jax.vmap(lambda i: jax.jacfwd(lambda x: range_from(i, x[0], x[1], x[2]))(jnp.zeros(3)))
-    )(jnp.asarray(node_idx))
-    sens = np.asarray(sens)
+    )
     # at fixed speed N_gx is proportional to the density: dN/dh = N dln(rho)/dh
     dlnrho_dh = np.asarray(
         jax.vmap(jax.grad(lambda h: jnp.log(m.atmosphere.density(h))))(jnp.asarray(alt[node_idx]))
@@ -583,7 +626,7 @@ def tabulate_reference(
 ) -> ReferenceTrajectory:
     """Fly the designed nominal and store the second-entry reference against speed."""
     earth = problem.model.earth
-    fl = fly_nominal(problem, d.sigma_1, d.sigma_a, d.sigma_b, d.v_switch)
+    fl = _fly_nominal(problem, d.sigma_1, d.sigma_a, d.sigma_b, d.v_switch)
     switch, t_sw = fl.switch, fl.t_switch
     rec = _record_second_entry(problem, d, fl)
     n, speed, t, rng = rec.n, rec.speed, rec.t, rec.range_to_go
@@ -612,11 +655,7 @@ def tabulate_reference(
         o = np.argsort(speed[node_idx])
         return jnp.asarray(np.interp(grid, speed[node_idx][o], x[o]))
 
-    def s2(dv, dfpa, dh, dbank):
-        y = perturb_switch_state(switch, earth, dv, dfpa, dh)
-        return second_entry_range(problem, y, t_sw, d.sigma_a, d.sigma_b, d.v_switch, dbank)
-
-    partials = jax.jit(jax.jacfwd(lambda x: s2(x[0], x[1], x[2], x[3])))(jnp.zeros(4))
+    partials = _switch_partials(problem, switch, t_sw, d.sigma_a, d.sigma_b, d.v_switch)
     fv = flight_variables(switch, earth)
     return ReferenceTrajectory(
         velocity_mps=jnp.asarray(grid),
