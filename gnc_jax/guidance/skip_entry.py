@@ -181,7 +181,8 @@ class SkipEntryState(NamedTuple):
 
     Attributes:
         phase: 0 hold, 1 predictor-corrector, 2 Kepler, 3 tracking.
-        pulled_up: Ḣ has exceeded ``pull_up_hdot_mps`` since guidance started.
+        pulled_up: the vehicle has risen ``pull_up_rise_m`` above ``dip_altitude_m``.
+        dip_altitude_m: lowest altitude since guidance started, until the pull-up, m.
         sigma_0: corrector solution, rad (start of the first-entry profile).
         sign: sign of the bank (+1 right, -1 left), flipped by the reversals.
         bank_mag: bank magnitude commanded last, rad (held through the Kepler phase).
@@ -199,6 +200,7 @@ class SkipEntryState(NamedTuple):
 
     phase: Array
     pulled_up: Array
+    dip_altitude_m: Scalar
     sigma_0: Scalar
     sign: Scalar
     bank_mag: Scalar
@@ -243,6 +245,7 @@ class _PredictorState(NamedTuple):
     t: Scalar  # time of ``now``
     dt: Scalar  # length of the step from ``before`` to ``now``
     pulled_up: Array
+    dip_altitude_m: Scalar
     kepler: Array
     second: Array
     kind: Array  # -1 running, else that of Prediction (3: inactive, no step taken)
@@ -311,16 +314,16 @@ class SkipEntryGuidance(AbstractEntryGuidance):
     kepler_load_g: Scalar = param(
         0.2, lo=0.0, lo_open=True, hi=5.0, units="g", doc="Kepler-phase load threshold"
     )
-    pull_up_hdot_mps: Scalar = param(
-        10.0,
+    pull_up_rise_m: Scalar = param(
+        1000.0,
         lo=0.0,
-        hi=1000.0,
-        units="m/s",
-        doc="climb rate that declares the pull-up, and sink rate that then declares the "
-        "second entry (law and predictor): a vehicle levelling off at the bottom of the "
-        "first dip (Hdot within a few m/s of 0, e.g. during a bank reversal) has neither "
-        "pulled up nor begun its second entry (with 0: at a -5.6 deg entry 4 of 256 runs "
-        "switched to tracking at the bottom of the dip and skipped out)",
+        hi=1e5,
+        units="m",
+        doc="rise above the bottom of the first dip that declares the pull-up (law and "
+        "predictor); a second entry without a Kepler phase needs it first. A vehicle "
+        "levelling off at the bottom of the dip (Hdot within a few m/s of 0 while a bank "
+        "reversal rolls) has not pulled up: with a pull-up at Hdot > 0 alone, 4 of 256 runs at "
+        "a -5.6 deg entry switched to tracking at the bottom of the dip and skipped out",
     )
     bracket_step_rad: Scalar = param(
         5.0,
@@ -509,7 +512,15 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         return sigma_0 + (self.reference.first_entry_bank_rad - sigma_0) * s
 
     def predict(
-        self, y: EntryState, t, pulled_up, sigma_0, model: EntryModel, target_fixed, active=True
+        self,
+        y: EntryState,
+        t,
+        pulled_up,
+        sigma_0,
+        model: EntryModel,
+        target_fixed,
+        active=True,
+        dip_altitude_m=None,
     ) -> Prediction:
         """Predicted range error of the bank profile ``sigma_0`` (seed 003 §3.1), m.
 
@@ -521,7 +532,8 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         from the switch point to the target. A skip too shallow to reach the Kepler phase has
         no such point: from its apogee the prediction flies the reference bank profile down to
         the chute and returns the signed along-track miss of the chute point; so does a
-        prediction that never pulls up. A climb above ``skip_out_altitude_m`` or running out
+        prediction that never pulls up (rises ``pull_up_rise_m`` above the lowest altitude,
+        ``dip_altitude_m`` so far, or the start's). A climb above ``skip_out_altitude_m`` or running out
         of steps returns a large overshoot. Under ``vmap`` the ``while_loop`` runs while one
         active run still integrates; an inactive run does no step.
 
@@ -543,6 +555,7 @@ class SkipEntryGuidance(AbstractEntryGuidance):
             t=jnp.asarray(t, float),
             dt=jnp.zeros(()),
             pulled_up=jnp.asarray(pulled_up),
+            dip_altitude_m=alt if dip_altitude_m is None else jnp.minimum(dip_altitude_m, alt),
             kepler=f,
             second=f,
             kind=jnp.where(active, -1, 3).astype(jnp.int32),
@@ -582,9 +595,10 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         alt1, speed1, hdot1 = altitude_speed_hdot(y1, model.earth)
         density1 = model.atmosphere.density(alt1)
         ng1 = model.load_g_xyz(density1, speed1)
-        pulled = c.pulled_up | (hdot1 > self.pull_up_hdot_mps)
+        dip = jnp.where(c.pulled_up, c.dip_altitude_m, jnp.minimum(c.dip_altitude_m, alt1))
+        pulled = c.pulled_up | (alt1 > dip + self.pull_up_rise_m)
         kepler = c.kepler | (pulled & (ng1 < self.kepler_load_g))
-        descending = pulled & (hdot1 < -self.pull_up_hdot_mps) & (ng1 >= self.kepler_load_g)
+        descending = pulled & (hdot1 < 0.0) & (ng1 >= self.kepler_load_g)
         switch = kepler & descending
         second = c.second | (~kepler & descending)
         chute = alt1 < self.chute_altitude_m
@@ -600,6 +614,7 @@ class SkipEntryGuidance(AbstractEntryGuidance):
             t=c.t + dt,
             dt=jnp.asarray(dt, float),
             pulled_up=pulled,
+            dip_altitude_m=dip,
             kepler=kepler,
             second=second,
             kind=kind,
@@ -643,7 +658,18 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         chi = r_e * crossrange_to_target(y_end.r, v_rel, target)
         return Prediction(miss, chi, kind, c.k)
 
-    def correct(self, y, t, pulled_up, sigma_prev, model, target_fixed, enabled, slope=None):
+    def correct(
+        self,
+        y,
+        t,
+        pulled_up,
+        sigma_prev,
+        model,
+        target_fixed,
+        enabled,
+        slope=None,
+        dip_altitude_m=None,
+    ):
         """Bounded regula falsi on sigma_0 (seed 003 eqs. 11-15), a fixed-iteration loop.
 
         Warm-started at the previous solution; with ``corrector_start = "secant"`` and the
@@ -654,7 +680,7 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         cycle's."""
 
         def miss(sigma_0, active):
-            p = self.predict(y, t, pulled_up, sigma_0, model, target_fixed, active)
+            p = self.predict(y, t, pulled_up, sigma_0, model, target_fixed, active, dip_altitude_m)
             return p.miss_m, p.crossrange_m, p.steps.astype(float)
 
         return bounded_regula_falsi_with_aux(
@@ -744,6 +770,7 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         return SkipEntryState(
             phase=zi,
             pulled_up=jnp.asarray(False),
+            dip_altitude_m=jnp.asarray(jnp.inf),
             sigma_0=self.reference.first_entry_bank_rad,
             sign=jnp.ones(()),
             bank_mag=ctx.hold_bank_rad,
@@ -775,7 +802,7 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         to_go = earth.equatorial_radius_m * along_track_to_go(y.r, v_rel, target)
         live = ~(fv.altitude_m < self.chute_altitude_m)
 
-        phase, pulled, events = self._phase_events(state, fv, ng, live)
+        phase, pulled, dip, events = self._phase_events(state, fv, ng, live)
         bank_offset = jnp.where(
             events.to_track, self.switch_compensation(fv, to_go), state.bank_offset
         )
@@ -813,6 +840,7 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         new = SkipEntryState(
             phase=phase,
             pulled_up=pulled,
+            dip_altitude_m=dip,
             sigma_0=sigma_0,
             sign=sign,
             bank_mag=mag,
@@ -851,22 +879,28 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         return drag_ratio, lift_ratio
 
     def _phase_events(self, state: SkipEntryState, fv: FlightVariables, ng, live):
-        """Phase of this step (hard logic, seed 003 Fig. 1), the pull-up flag and the events."""
+        """Phase of this step (hard logic, seed 003 Fig. 1), the pull-up flag, the dip's
+        altitude and the events."""
         phase = state.phase
         start = live & (phase == 0) & (ng > self.ng0_g)
         phase = jnp.where(start, 1, phase)
-        pulled = state.pulled_up | ((phase >= 1) & (fv.hdot_mps > self.pull_up_hdot_mps))
+        dip = jnp.where(
+            (phase >= 1) & ~state.pulled_up,
+            jnp.minimum(state.dip_altitude_m, fv.altitude_m),
+            state.dip_altitude_m,
+        )
+        pulled = state.pulled_up | ((phase >= 1) & (fv.altitude_m > dip + self.pull_up_rise_m))
         to_kepler = live & (phase == 1) & pulled & (fv.hdot_mps > 0.0) & (ng < self.kepler_load_g)
         phase = jnp.where(to_kepler, 2, phase)
         to_track = (
             live
             & ((phase == 1) | (phase == 2))
             & pulled
-            & (fv.hdot_mps < -self.pull_up_hdot_mps)
+            & (fv.hdot_mps < 0.0)
             & (ng >= self.kepler_load_g)
         )
         phase = jnp.where(to_track, 3, phase)
-        return phase, pulled, _PhaseEvents(start, to_kepler, to_track)
+        return phase, pulled, dip, _PhaseEvents(start, to_kepler, to_track)
 
     def warm_start(self, state: SkipEntryState, speed):
         """The corrector's first guess at ``speed``: with ``corrector_start = "secant"`` the
@@ -892,6 +926,7 @@ class SkipEntryGuidance(AbstractEntryGuidance):
                 ctx.target_fixed,
                 active,
                 state.corrector_slope,
+                state.dip_altitude_m,
             )
             return res._replace(slope=jnp.asarray(res.slope, dtype=float))
 

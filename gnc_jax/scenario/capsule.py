@@ -84,8 +84,9 @@ SCHEMA = {
             "str",
             "shortest",
             choices=("shortest", "through_lift_up"),
-            doc="way round of a bank reversal: the shorter one (keeps the sign of the vertical "
-            "lift: a lift-down bank reverses through lift-down) or always through lift-up",
+            doc="way round of a bank reversal: 'shortest' rolls a reversal between two "
+            "lift-down banks (beyond 90 deg) through lift-down, every other through lift-up; "
+            "'through_lift_up' rolls every reversal through lift-up",
         ),
     },
     "guidance": {
