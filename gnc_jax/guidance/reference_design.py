@@ -52,7 +52,7 @@ from .entry_common import (
 from .skip_entry import ReferenceTrajectory
 
 #: bump when the design procedure changes, so that cached references are redesigned
-REFERENCE_VERSION = 4
+REFERENCE_VERSION = 5
 
 # The first-entry bank search of the design (solve_first_entry_bank): bounds, bracketing step
 # and steps (eq. 15), the first guess, and the second-entry profile the design starts from.
@@ -333,6 +333,9 @@ def require_reachable(problem: NominalProblem, entry: dict, vehicle: dict, guess
       the chute ranges of the candidates that skip and land: no bank brackets the target.
 
     ``entry`` and ``vehicle`` are the scenario sections (file units) the messages quote.
+    Returns the reachable interval (km) and the candidate first-entry bank (rad) whose
+    nominal, with the design's initial second-entry profile, lands nearest the target: the
+    design's first guess.
     """
     banks = candidate_banks(SIGMA_1_GUESS_RAD if guess is None else guess)
     flights = _candidate_flights(problem, jnp.asarray(banks), jnp.asarray(_profile_banks()))
@@ -369,7 +372,13 @@ def require_reachable(problem: NominalProblem, entry: dict, vehicle: dict, guess
             f"chute ranges of the reference design's nominal skip with {span} "
             f"({_conditions(entry, vehicle)})"
         )
-    return lo, hi
+    # the design's first solve brackets only SIGMA_1_BRACKET_STEPS steps around its guess,
+    # and a guess whose nominal never lands (a flat range error) gives it nothing to follow:
+    # near the overshoot boundary the fixed 74 deg guess skipped out and the design failed
+    column = int(np.argmin(np.abs(_profile_banks() - PROFILE_INIT_RAD[0])))
+    usable = lands[:, column] if lands[:, column].any() else lands.any(axis=1)
+    miss = np.where(usable, np.abs(err_m[:, column]), np.inf)
+    return lo, hi, float(banks[int(np.argmin(miss))])
 
 
 def require_design(problem: NominalProblem, d: "DesignResult", entry: dict, vehicle: dict):
@@ -729,14 +738,16 @@ def reference_for(problem: NominalProblem, description: dict, **design_kwargs):
         # compiles, so the bar's rate is only a rough guide
         with tqdm(total=steps + 2, desc="reference design", unit="stage", file=sys.stderr) as bar:
             bar.set_postfix_str("reach check")
-            require_reachable(problem, entry, vehicle, design_kwargs.get("sigma_1_guess"))
+            guess = design_kwargs.get("sigma_1_guess")
+            _, _, nearest = require_reachable(problem, entry, vehicle, guess)
             bar.update()
 
             def stepped(step, objective):
                 bar.set_postfix_str(f"step {step}/{steps}, objective {objective:.4g}")
                 bar.update()
 
-            d = design(problem, callback=stepped, **design_kwargs)
+            kwargs = dict(design_kwargs, sigma_1_guess=nearest if guess is None else guess)
+            d = design(problem, callback=stepped, **kwargs)
             require_design(problem, d, entry, vehicle)
             bar.set_postfix_str("tabulating the reference")
             ref = tabulate_reference(problem, d)
