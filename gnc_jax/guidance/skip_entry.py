@@ -534,8 +534,8 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         the chute and returns the signed along-track miss of the chute point; so does a
         prediction that never pulls up (rises ``pull_up_rise_m`` above the lowest altitude:
         ``dip_altitude_m`` so far, or the start's). A climb above ``skip_out_altitude_m`` or
-        running out of steps returns a large overshoot. Under ``vmap`` the ``while_loop`` runs while one
-        active run still integrates; an inactive run does no step.
+        running out of steps returns a large overshoot. Under ``vmap`` the ``while_loop`` runs
+        while one active run still integrates; an inactive run does no step.
 
         The state is integrated as components, each step reusing the derivative evaluated at
         the end of the previous one (four right-hand sides per step, the fourth also giving
