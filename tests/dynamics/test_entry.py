@@ -360,6 +360,46 @@ def test_bank_actuator_respects_limits_and_tracks_time_optimal_profile(command_d
     ideal = np.sign(command) * np.array(
         [_time_optimal_bank(tk, abs(command), max_rate, max_accel) for tk in t]
     )
-    assert np.max(np.abs(bank - ideal)) < max_rate * dt
-    np.testing.assert_allclose(bank[-20:], command, atol=1e-9)
+    wrapped = lambda a: np.remainder(a + np.pi, 2.0 * np.pi) - np.pi  # noqa: E731 (180 = -180)
+    assert np.max(np.abs(wrapped(bank - ideal))) < max_rate * dt
+    np.testing.assert_allclose(wrapped(bank[-20:] - command), 0.0, atol=1e-9)
     np.testing.assert_allclose(rate[-20:], 0.0, atol=1e-9)
+
+
+def _roll(actuator, bank0, commands, dt=0.05, seconds=30.0):
+    """Bank history of ``actuator`` from rest at ``bank0`` (deg); ``commands``: (from time s,
+    command deg) pairs, the last one given holds."""
+    n = int(seconds / dt)
+    t = dt * np.arange(n)
+    cmd = np.zeros(n)
+    for t0, c in commands:
+        cmd[t >= t0] = c * DEG
+
+    def step(state, c):
+        new = actuator.step(state, c, dt)
+        return new, new.bank
+
+    _, bank = jax.lax.scan(step, actuator.init(bank0 * DEG), jnp.asarray(cmd))
+    return np.degrees(np.asarray(bank))
+
+
+def test_bank_reversal_ways_round():
+    """Default: a reversal between two lift-down banks rolls through lift-down (the angle flown
+    stays in (-180, 180]), one between lift-up banks through lift-up, and a roll under way keeps
+    its way round when the command changes; ``shortest=False`` rolls every reversal through
+    lift-up."""
+    default, straight = BankActuator(), BankActuator(shortest=False)
+    down = _roll(default, 120.0, [(0.0, -120.0)])
+    slack = 1.0  # deg: the discrete braking overshoots by up to max_rate dt
+    assert np.all(np.abs(down) >= 120.0 - slack) and np.all(np.abs(down) <= 180.0)
+    np.testing.assert_allclose(down[-1], -120.0, atol=1e-9)
+    up = _roll(default, 60.0, [(0.0, -60.0)])
+    assert np.all(np.abs(up) <= 60.0 + slack)
+    np.testing.assert_allclose(up[-1], -60.0, atol=1e-9)
+    # under way through lift-down when the command becomes a lift-up bank: no turn back
+    changed = _roll(default, 120.0, [(0.0, -120.0), (4.0, -80.0)])
+    assert np.all(np.abs(changed) >= 80.0 - slack)
+    np.testing.assert_allclose(changed[-1], -80.0, atol=1e-9)
+    old = _roll(straight, 120.0, [(0.0, -120.0)])
+    assert np.min(np.abs(old)) < 1.0
+    np.testing.assert_allclose(old[-1], -120.0, atol=1e-9)

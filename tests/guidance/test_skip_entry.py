@@ -11,6 +11,7 @@ from gnc_jax.guidance.base import family_of
 from gnc_jax.guidance.entry_common import (
     AbstractEntryGuidance,
     EntryNav,
+    FlightVariables,
     drag_and_lift,
     flight_variables,
 )
@@ -168,3 +169,36 @@ def test_predictor_coast_step_costs_less_accuracy_than_the_corrector_tolerance(l
     np.testing.assert_array_equal(reference[1], 0)
     assert float(jnp.max(jnp.abs(coarse[0] - reference[0]))) < float(law.range_tolerance_m)
     assert int(jnp.sum(coarse[2])) < 0.6 * int(jnp.sum(reference[2]))
+
+
+def test_levelling_off_at_the_dip_is_not_a_pull_up_nor_a_second_entry(law_and_ctx):
+    """Phase logic (law; the predictor uses the same rule): a vehicle that levels off at the
+    bottom of its first dip (climbs a few metres while a reversal rolls, then sinks again at
+    3 g) stays in the first entry; one that rose ``pull_up_rise_m`` above the dip has pulled up,
+    and its descent at a load above the Kepler threshold starts the second entry (phase 3)."""
+    _, law, ctx = law_and_ctx
+    m = ctx.model
+    y = state_at(61.6e3, ctx)
+    nav = EntryNav(y, *drag_and_lift(y, m.vehicle, m.earth, m.atmosphere))
+    state = law.init(nav, ctx)._replace(phase=jnp.asarray(1))
+    live = jnp.asarray(True)
+
+    def after(altitudes, hdots, ng):
+        s = state
+        for h, hd in zip(altitudes, hdots):
+            fv = FlightVariables(jnp.asarray(9.5e3), jnp.asarray(0.0), h, jnp.asarray(hd))
+            phase, pulled, dip, _ = law._phase_events(s, fv, jnp.asarray(ng), live)
+            s = s._replace(phase=phase, pulled_up=pulled, dip_altitude_m=dip)
+        return s
+
+    dip = [61_600.0, 61_583.0, 61_586.0, 61_588.0, 61_587.0, 61_575.0]
+    level = after(dip, [-5.0, -1.0, 2.0, 2.0, -2.5, -9.0], 3.1)
+    assert int(level.phase) == 1 and not bool(level.pulled_up)
+    assert float(level.dip_altitude_m) == 61_575.0
+    rise = float(law.pull_up_rise_m)
+    climbed = after(dip[:2] + [61_583.0 + rise + 10.0], [-5.0, -1.0, 40.0], 3.0)
+    assert bool(climbed.pulled_up) and int(climbed.phase) == 1
+    state_climbed = climbed
+    fv = FlightVariables(jnp.asarray(9.0e3), jnp.asarray(0.0), 62_000.0, jnp.asarray(-30.0))
+    phase, *_ = law._phase_events(state_climbed, fv, jnp.asarray(1.5), live)
+    assert int(phase) == 3
