@@ -56,8 +56,8 @@ def envelope_figures(env, out: pathlib.Path) -> list[pathlib.Path]:
             _envelope_map(fig, ax, env, keys, xs, ys, metric, label)
         system.envelope_overlay(ax, env, keys[0], keys[1] if ys is not None else None)
         ax.set_title(f"{env.scenario.name}: {label}, {env.runs} runs per cell")
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=7, loc="best")
+        if ax.get_legend_handles_labels()[0]:  # below the axes: no cell hidden under it
+            ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=3)
         save(fig, f"envelope_{metric}.png")
     return files
 

@@ -728,8 +728,9 @@ def reference_for(problem: NominalProblem, description: dict, **design_kwargs):
     else:
         entry, vehicle = description["entry"], description["vehicle"]
         print(
-            "gnc_jax: designing the reference trajectory of this entry and vehicle (once; about "
-            f"1-3 min on a 2-core machine; cached in {path})",
+            "gnc_jax: designing the reference trajectory of this entry and vehicle (once; the "
+            "first design of a process compiles, 1-3 min, later ones take about 10 s; cached in "
+            f"{path})",
             file=sys.stderr,
             flush=True,
         )
