@@ -84,16 +84,21 @@ def test_sequential_update_equals_the_joint_dense_update(seed):
     assert np.abs((p1 - (p - k @ s @ k.T)) / scale).max() < 1e-10
 
 
+def _planar_prediction(seed):
+    """A planar case's estimate, its LOS prediction (camera on the estimated target
+    direction) and the angle noise sigma."""
+    r, v, p = _case(np.random.default_rng(seed), planar=True)
+    nav = NavEstimate(jnp.asarray(np.concatenate([r, v])), jnp.asarray(p))
+    c = camera_attitude(jnp.asarray(-r), jnp.array([0.0, 0, 1]))
+    sigma = 3.2e-4
+    return nav, predict_los(nav, c, sigma**2 * jnp.eye(2)), sigma
+
+
 def test_planar_first_angle_only_leaves_the_in_plane_block_as_the_joint_update():
     """``angles=1``: with no out-of-plane correlation, an exact (zero-innovation) out-of-plane
     angle changes only out-of-plane entries: the in-plane state and covariance are the joint
     update's."""
-    rng = np.random.default_rng(7)
-    r, v, p = _case(rng, planar=True)
-    nav = NavEstimate(jnp.asarray(np.concatenate([r, v])), jnp.asarray(p))
-    c = camera_attitude(jnp.asarray(-r), jnp.array([0.0, 0, 1]))
-    sigma = 3.2e-4
-    pred = predict_los(nav, c, sigma**2 * jnp.eye(2))
+    nav, pred, sigma = _planar_prediction(7)
     z = pred.z + jnp.asarray([2e-4, 0.0])
     ref, _ = ekf_update(nav, z, pred)
     r1, v1, pk = los_update(
@@ -111,12 +116,7 @@ def test_planar_packing_carries_the_in_plane_entries_only_and_updates_them_ident
     """``pack(p, PLANAR)`` (10 entries, the planar intercept's form): the in-plane update and
     propagation equal the full packed filter's bit for bit (the dropped out-of-plane entries
     enter the full one only as exact zeros), the out-of-plane entries read as 0."""
-    rng = np.random.default_rng(11)
-    r, v, p = _case(rng, planar=True)
-    nav = NavEstimate(jnp.asarray(np.concatenate([r, v])), jnp.asarray(p))
-    c = camera_attitude(jnp.asarray(-r), jnp.array([0.0, 0, 1]))
-    sigma = 3.2e-4
-    pred = predict_los(nav, c, sigma**2 * jnp.eye(2))
+    nav, pred, sigma = _planar_prediction(11)
     innov = pred.z * 0.0 + jnp.asarray([2e-4, 0.0])
     h_r = pred.jacobian[:, :3]
     full = los_update(nav.r, nav.v, pack(nav.p), h_r, innov, sigma**2, angles=1)
