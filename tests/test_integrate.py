@@ -72,3 +72,22 @@ def test_convergence_order_of_the_tableaus(tableau):
         errs.append(np.linalg.norm(np.asarray(y[:2]) - exact))
     order = np.log2(errs[0] / errs[1])
     assert order == pytest.approx(tab.order, abs=0.35)
+
+
+@pytest.mark.parametrize("mu,tide", [(0.0, 0.0), (5e9, 0.0), (0.0, 1e-9), (5e9, 1e-9)])
+def test_terms_left_out_when_zero_give_the_same_bits(mu, tide):
+    """RelativeDynamics.of computes only the nonzero terms; the step equals the one that
+    computes every term (adding exact zeros) bit for bit, with thrust and without."""
+    from gnc_jax.dynamics.impactor import rk4
+
+    sun = jnp.array([0.6, 0.8, 0.0])
+    every = RelativeDynamics(jnp.asarray(mu), jnp.asarray(tide), sun)
+    needed = RelativeDynamics.of(mu, tide, sun)
+    assert (needed.point_mass, needed.tide) == (mu != 0.0, tide != 0.0)
+    y0 = ImpactorState(jnp.array([7e6, -3e5, 2e4]), jnp.array([-1e4, 3.0, -1.0]), jnp.asarray(372.0))
+    for thrust, flow in ((jnp.zeros(3), 0.0), (jnp.array([10.0, -60.0, 40.0]), 0.04)):
+        a = jax.jit(rk4)(every, y0, thrust, flow, 1.0)
+        b = jax.jit(rk4)(needed, y0, thrust, flow, 1.0)
+        for x, y in zip(a, b):
+            np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+        np.testing.assert_array_equal(np.asarray(every.gravity(y0.r)), np.asarray(needed.gravity(y0.r)))

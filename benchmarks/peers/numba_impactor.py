@@ -25,9 +25,9 @@ Two ways to feed it random numbers:
   attitude control, attitude knowledge), 4 per ignition (burn magnitude, pointing) and 6 per
   image interval in which the engine fired (the accelerometer's white noise integrated over the
   interval). Same distributions as gnc_jax's layout, in float64 (gnc_jax draws its per-image
-  normals in single precision); gnc_jax's ignition draws are the image's for the first
-  ignition of an interval and a cyclic table of 8 spares for later ones, here every ignition
-  draws afresh.
+  normals in single precision); gnc_jax's ignition and accelerometer draws come from a per-run
+  table with a row per image interval in which the engine fires (its first ignition, its
+  later ones, the accelerometer noise), here every ignition draws afresh.
 
 The benchmark times both against gnc_jax's ``run_study`` and its sharded batch function (as
 ``benchmarks/impactor.py`` times it) in the same process, and profiles the kernel by switching
@@ -102,8 +102,10 @@ OUT_FIELDS = (
 )
 N_OUT = len(OUT_FIELDS)
 N_FIXED = 15  # per-run normals: delivery, knowledge position, velocity, attitude/accel biases
-N_SPARES = 8  # gnc_jax's table of execution draws for later ignitions within an interval
-IMAGE_DRAWS = 18  # gnc_jax's normals per image (layout in gnc_jax.simulation.impactor)
+# gnc_jax's layout (gnc_jax.simulation.impactor): normals per image, and the per-run table of
+# burn draws (rows, normals per row)
+IMAGE_DRAWS = 8
+N_BURN_INTERVALS, BURN_DRAWS = 64, 14
 STATUS_OK, STATUS_NAN, STATUS_PROPELLANT = (
     int(gj.Status.ok),
     int(gj.Status.nan),
@@ -344,7 +346,7 @@ def _run(
     coast_steps,
     own,
     fixed,
-    spares,
+    burns,
     images,
     do_images,
     do_steps,
@@ -352,7 +354,7 @@ def _run(
 ):
     """One closed-loop run into ``out`` (OUT_FIELDS). ``own``: draw the normals here (numba's
     per-thread generator, seeded by the caller); else read them from ``fixed`` (15),
-    ``spares`` (8 x 4) and ``images`` (n_images x 18), gnc_jax's layout. ``do_images`` /
+    ``burns`` (64 x 14) and ``images`` (n_images x 8), gnc_jax's layout. ``do_images`` /
     ``do_steps``: the profile's switches (both True for a real run)."""
     dt, image_dt = prm[DT], prm[IMAGE_DT]
     mu, tide, s0, s1, s2 = prm[MU], prm[TIDE], prm[SUN], prm[SUN + 1], prm[SUN + 2]
@@ -372,7 +374,7 @@ def _run(
     up0, up1, up2 = c_bi[2, 0], c_bi[2, 1], c_bi[2, 2]  # camera roll reference
 
     # Per-run draws and initial conditions.
-    w = np.empty(IMAGE_DRAWS)
+    w = np.empty(18)  # [0:15] per run, then [0:8] per image, [8:12] ignition, [12:18] accel
     if own:
         for j in range(N_FIXED):
             w[j] = np.random.standard_normal()
@@ -402,7 +404,7 @@ def _run(
     sigma_b = _plan(prm, c_bi, p, 0.0, rh0, rh1, rh2, vh0, vh1, vh2)
     throttle_prev = 0.0
     e_mag = e_p0 = e_p1 = e_p2 = 0.0  # execution error of the current firing (normals)
-    spares_used = 0
+    burn_intervals = 0
     dv_total = burn_time = los_error_sq = 0.0
     firings = images_used = 0
     q0 = q1 = q2 = qv = vv = 0.0  # the law's rho, rho . rho_dot, |v_hat|^2 (thrust direction)
@@ -487,9 +489,11 @@ def _run(
                     p[c, r] = v
             sigma_b = _plan(prm, c_bi, p, t_img, rh0, rh1, rh2, vh0, vh1, vh2)
 
-        # Execution draws of this interval's ignitions (fed: gnc_jax's first/spare layout).
-        first_mag, first_p0, first_p1, first_p2 = w[8], w[9], w[10], w[11]
-        spare = spares_used % N_SPARES
+        # Execution draws of this interval's ignitions (fed: gnc_jax's burn-table row).
+        row = 0 if own else burn_intervals % N_BURN_INTERVALS
+        first_mag, first_p0, first_p1, first_p2 = (
+            burns[row, 0], burns[row, 1], burns[row, 2], burns[row, 3]
+        )  # fmt: skip
         ignitions_image = 0
         mom_a = mom_b = mom_c = 0.0
         burn_image = 0.0
@@ -534,12 +538,11 @@ def _run(
                             e_mag, e_p0, e_p1, e_p2 = first_mag, first_p0, first_p1, first_p2
                         else:
                             e_mag, e_p0, e_p1, e_p2 = (
-                                spares[spare, 0],
-                                spares[spare, 1],
-                                spares[spare, 2],
-                                spares[spare, 3],
+                                burns[row, 4],
+                                burns[row, 5],
+                                burns[row, 6],
+                                burns[row, 7],
                             )
-                            spares_used += 1
                         ignitions_image += 1
                         firings += 1
                     # Thrust along the zero-effort-miss direction, tilted by the pointing error.
@@ -590,6 +593,10 @@ def _run(
                 if own:
                     for j in range(12, 18):
                         w[j] = np.random.standard_normal()
+                else:
+                    for j in range(12, 18):
+                        w[j] = burns[row, j - 4]
+                burn_intervals += 1
                 sa = np.sqrt(mom_a)
                 beta = mom_b / sa
                 gamma = np.sqrt(max(mom_c - beta * beta, 0.0))
@@ -659,13 +666,13 @@ def _run(
 
 @njit(parallel=True, **_JIT)
 def simulate_fed(
-    prm, c_bi, p0, n_images, steps, coast_steps, fixed, spares, images, do_images, do_steps, out
+    prm, c_bi, p0, n_images, steps, coast_steps, fixed, burns, images, do_images, do_steps, out
 ):
-    """Runs ``0..N-1`` with the normals of gnc_jax's layout: ``fixed`` (N, 15), ``spares``
-    (N, 8, 4), ``images`` (N, n_images, 18); outcomes into ``out`` (N, N_OUT)."""
+    """Runs ``0..N-1`` with the normals of gnc_jax's layout: ``fixed`` (N, 15), ``burns``
+    (N, 64, 14), ``images`` (N, n_images, 8); outcomes into ``out`` (N, N_OUT)."""
     for i in prange(fixed.shape[0]):
         _run(
-            prm, c_bi, p0, n_images, steps, coast_steps, False, fixed[i], spares[i], images[i],
+            prm, c_bi, p0, n_images, steps, coast_steps, False, fixed[i], burns[i], images[i],
             do_images, do_steps, out[i],
         )  # fmt: skip
 
@@ -674,11 +681,12 @@ def simulate_fed(
 def simulate_own(prm, c_bi, p0, n_images, steps, coast_steps, seed, do_images, do_steps, out):
     """Runs ``0..N-1`` drawing their own normals: run ``i`` seeds the thread's generator with
     ``seed + i`` (reproducible whatever the thread schedule); outcomes into ``out``."""
-    fixed, spares, images = np.zeros(N_FIXED), np.zeros((1, 4)), np.zeros((1, IMAGE_DRAWS))
+    fixed = np.zeros(N_FIXED)
+    burns, images = np.zeros((1, BURN_DRAWS)), np.zeros((1, IMAGE_DRAWS))
     for i in prange(out.shape[0]):
         np.random.seed(seed + i)
         _run(
-            prm, c_bi, p0, n_images, steps, coast_steps, True, fixed, spares, images,
+            prm, c_bi, p0, n_images, steps, coast_steps, True, fixed, burns, images,
             do_images, do_steps, out[i],
         )  # fmt: skip
 
@@ -700,7 +708,7 @@ def _draws_function():
 def gnc_jax_draws(sim, runs, seed=0, start=0):
     """gnc_jax's standard normals of runs ``start..start+runs-1`` of ``sim`` (an
     ``ImpactorSimulation``; ``run_draws`` of each run's key), stacked:
-    ``(fixed (N, 15), spares (N, 8, 4), images (N, n_images, 18))``."""
+    ``(fixed (N, 15), burns (N, 64, 14), images (N, n_images, 8))``."""
     d = _draws_function()(sim, jnp.asarray(seed, jnp.uint32), jnp.arange(start, start + runs))
     fixed = np.concatenate(
         [
@@ -717,7 +725,7 @@ def gnc_jax_draws(sim, runs, seed=0, start=0):
     )
     return (
         np.ascontiguousarray(fixed),
-        np.ascontiguousarray(np.asarray(d["spares"])),
+        np.ascontiguousarray(np.asarray(d["burns"])),
         np.ascontiguousarray(np.asarray(d["images"])),
     )
 
@@ -729,14 +737,14 @@ def _as_dict(out):
     return d
 
 
-def run_fed(scenario, fixed, spares, images, do_images=True, do_steps=True):
+def run_fed(scenario, fixed, burns, images, do_images=True, do_steps=True):
     """Outcomes (dict of arrays, OUT_FIELDS) of the runs whose normals are given."""
     prm, c_bi, p0, n_images, steps, coast = problem(scenario)
     if images.shape[1:] != (n_images, IMAGE_DRAWS):
         raise ValueError(f"images: shape {images.shape}; expected (N, {n_images}, {IMAGE_DRAWS})")
     out = np.empty((fixed.shape[0], N_OUT))
     simulate_fed(
-        prm, c_bi, p0, n_images, steps, coast, fixed, spares, images, do_images, do_steps, out
+        prm, c_bi, p0, n_images, steps, coast, fixed, burns, images, do_images, do_steps, out
     )
     return _as_dict(out)
 
@@ -793,7 +801,7 @@ def _gnc_jax_timers(scenario, n, batch=True):
 def _numpy_draws(n, n_images, rng):
     return (
         rng.standard_normal((n, N_FIXED)),
-        rng.standard_normal((n, N_SPARES, 4)),
+        rng.standard_normal((n, N_BURN_INTERVALS, BURN_DRAWS)),
         rng.standard_normal((n, n_images, IMAGE_DRAWS)),
     )
 
@@ -814,14 +822,14 @@ def _fed_timer(scenario, n, chunk):
         for start in range(0, n, chunk):
             m = min(chunk, n - start)
             t0 = time.perf_counter()
-            fixed, spares, images = gnc_jax_draws(sim, m, seed=0, start=start)
+            fixed, burns, images = gnc_jax_draws(sim, m, seed=0, start=start)
             jax_draw_s += time.perf_counter() - t0
             t0 = time.perf_counter()
             _numpy_draws(m, n_images, rng)
             numpy_draw_s += time.perf_counter() - t0
             t0, c0 = time.perf_counter(), time.process_time()
             simulate_fed(
-                prm, c_bi, p0, n_images, steps, coast, fixed, spares, images, True, True, out[:m]
+                prm, c_bi, p0, n_images, steps, coast, fixed, burns, images, True, True, out[:m]
             )
             kernel_s += time.perf_counter() - t0
             kernel_cpu_s += time.process_time() - c0
@@ -904,14 +912,14 @@ def _compile_times(scenario):
     """First-call wall of each kernel in this process (compile, or load from numba's on-disk
     cache) and whether the cache answered."""
     prm, c_bi, p0, n_images, steps, coast = problem(scenario)
-    fixed, spares, images = gnc_jax_draws(gj.build(scenario)[0], 2)
+    fixed, burns, images = gnc_jax_draws(gj.build(scenario)[0], 2)
     out = np.empty((2, N_OUT))
     times = {}
     for name, call in (
         (
             "fed",
             lambda: simulate_fed(
-                prm, c_bi, p0, n_images, steps, coast, fixed, spares, images, True, True, out
+                prm, c_bi, p0, n_images, steps, coast, fixed, burns, images, True, True, out
             ),
         ),
         (

@@ -32,37 +32,73 @@ class RelativeDynamics(eqx.Module):
         mu_target: target GM, m^3/s^2 (0 switches the term off).
         tide_rate2: mu_sun / d^3 with d the target's heliocentric distance, 1/s^2 (0 = off).
         sun_direction: unit vector from the target towards the Sun (inertial).
+        point_mass, tide: whether each term is computed at all (static). A term whose constant
+            is zero adds exact zeros, so leaving it out gives the same bits for less work: the
+            paper scenarios have neither term, and the gravity-free RK4 step measured 1.2x
+            faster for the whole closed loop. :meth:`of` sets them from the values; a term
+            switched off here stays off whatever value its leaf is later given.
     """
 
     mu_target: Scalar
     tide_rate2: Scalar
     sun_direction: Vector3
+    point_mass: bool = eqx.field(static=True, default=True)
+    tide: bool = eqx.field(static=True, default=True)
+
+    @classmethod
+    def of(cls, mu_target, tide_rate2, sun_direction) -> "RelativeDynamics":
+        """The dynamics with each term computed only when its constant (a number) is nonzero."""
+        return cls(
+            jnp.asarray(mu_target, jnp.float64),
+            jnp.asarray(tide_rate2, jnp.float64),
+            sun_direction,
+            point_mass=float(mu_target) != 0.0,
+            tide=float(tide_rate2) != 0.0,
+        )
+
+    @property
+    def active(self) -> bool:
+        """Whether any term is computed (static)."""
+        return self.point_mass or self.tide
 
     def gravity(self, r: Vector3) -> Vector3:
         """Differential gravitational acceleration at ``r``, m/s^2."""
-        r2 = dot3(r, r)
-        # At the centre itself (a zero-error approach aims exactly there) the term is 0, not NaN.
-        centre = r2 == 0.0
-        r2 = jnp.where(centre, 1.0, r2)
-        point_mass = jnp.where(centre, 0.0, -self.mu_target * r / (r2 * jnp.sqrt(r2)))
-        s = self.sun_direction
-        # By component: the Sun direction is shared by a batch (see _numerics.sub3).
-        d = 3.0 * dot3(r, s)
-        tide = self.tide_rate2 * jnp.stack([d * s[0] - r[0], d * s[1] - r[1], d * s[2] - r[2]])
-        return point_mass + tide
+        g = jnp.zeros_like(r)
+        if self.point_mass:
+            r2 = dot3(r, r)
+            # At the centre itself (a zero-error approach aims there) the term is 0, not NaN.
+            centre = r2 == 0.0
+            r2 = jnp.where(centre, 1.0, r2)
+            g = g + jnp.where(centre, 0.0, -self.mu_target * r / (r2 * jnp.sqrt(r2)))
+        if self.tide:
+            s = self.sun_direction
+            # By component: the Sun direction is shared by a batch (see _numerics.sub3).
+            d = 3.0 * dot3(r, s)
+            g = g + self.tide_rate2 * jnp.stack(
+                [d * s[0] - r[0], d * s[1] - r[1], d * s[2] - r[2]]
+            )
+        return g
 
     def gravity_components(self, x, y, z):
-        """:meth:`gravity` with ``r`` given and returned as components (same arithmetic)."""
-        r2 = x * x + y * y + z * z
-        centre = r2 == 0.0
-        r2 = jnp.where(centre, 1.0, r2)
-        r3 = r2 * jnp.sqrt(r2)
-        mu, k, s = self.mu_target, self.tide_rate2, self.sun_direction
-        d = 3.0 * (x * s[0] + y * s[1] + z * s[2])
-        return tuple(
-            jnp.where(centre, 0.0, -mu * c / r3) + k * (d * s[i] - c)
-            for i, c in enumerate((x, y, z))
-        )
+        """:meth:`gravity` with ``r`` given and returned as components (same arithmetic), or
+        None when no term is computed (:attr:`active`)."""
+        terms = []
+        if self.point_mass:
+            r2 = x * x + y * y + z * z
+            centre = r2 == 0.0
+            r2 = jnp.where(centre, 1.0, r2)
+            r3 = r2 * jnp.sqrt(r2)
+            mu = self.mu_target
+            terms.append(tuple(jnp.where(centre, 0.0, -mu * c / r3) for c in (x, y, z)))
+        if self.tide:
+            k, s = self.tide_rate2, self.sun_direction
+            d = 3.0 * (x * s[0] + y * s[1] + z * s[2])
+            terms.append(tuple(k * (d * s[i] - c) for i, c in enumerate((x, y, z))))
+        if not terms:
+            return None
+        if len(terms) == 1:
+            return terms[0]
+        return tuple(a + b for a, b in zip(*terms))
 
 
 class Engine(eqx.Module):
@@ -133,8 +169,9 @@ def rk4(
 def _vector_field_components(t, y, args):
     """:func:`vector_field` with r, v and the thrust as tuples of components."""
     dynamics, thrust, mass_flow = args
-    g = V3(*dynamics.gravity_components(*y.r))
-    return ImpactorState(y.v, g + thrust / y.m, -mass_flow)
+    g = dynamics.gravity_components(*y.r)
+    a = thrust / y.m if g is None else V3(*g) + thrust / y.m
+    return ImpactorState(y.v, a, -mass_flow)
 
 
 def propagate(

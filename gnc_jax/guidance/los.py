@@ -13,7 +13,7 @@ from typing import NamedTuple
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._numerics import norm3, safe_norm, sub3
+from .._numerics import cross3, dot3, norm3, safe_norm, sub3
 from .._types import Scalar
 from ..geometry.ellipse import b_plane_position_covariance, mean_position_error
 from ..geometry.los import los_rate, range_rate, zero_effort_miss
@@ -53,6 +53,35 @@ def miss_limits(k1, k2, sigma_b, rho_n, nav, ctx: ImpactorGuidanceContext):
     resolution = 0.5 * ctx.engine.thrust_n / ctx.mass_kg * ctx.dt_s * t_go
     rho_min = jnp.maximum(k2 * sigma_b, resolution)
     return rho_min, jnp.maximum(k1 * sigma_b, rho_min)
+
+
+def _hard_switch(rho, rho_dot, state, nav, k1, k2, ctx: ImpactorGuidanceContext):
+    """The hard switch of :meth:`LOSSwitchingCurveGuidance.step` without a square root.
+
+    |omega| >= omega_open (eq. 20) holds exactly when rho^2 > rho_l^2 and either the range is
+    opening (omega_open <= 0) or |rho x rho_dot|^2 (rho^2 - rho_l^2) >= rho_l^2
+    (rho . rho_dot)^2, both sides of the comparison multiplied out by positive factors (and
+    likewise for omega_close; rho_l^2 is built from squares as :func:`miss_limits` builds
+    rho_l). The same decisions as comparing the rates (up to the last bit's rounding at an
+    exact tie), for a third of the law step's square roots and divisions: the step runs at
+    every control step of every run, so it is a fifth of the closed loop's time.
+    """
+    rr = dot3(rho, rho)
+    qv = dot3(rho, rho_dot)
+    o = cross3(rho, rho_dot)
+    oo = dot3(o, o)
+    vv = dot3(nav.v, nav.v)
+    c = 0.5 * ctx.engine.thrust_n / ctx.mass_kg * ctx.dt_s
+    resolution2 = c * c * rr / vv
+    s2 = state.sigma_b_m * state.sigma_b_m
+    close2 = jnp.maximum(k2 * k2 * s2, resolution2)
+    open2 = jnp.maximum(k1 * k1 * s2, close2)
+    closing = qv < 0.0
+    opens = (rr > open2) & (~closing | (oo * (rr - open2) >= open2 * (qv * qv)))
+    closes = (rr <= close2) | (
+        closing & (oo * (rr - close2) <= close2 * (qv * qv)) | (~closing & (oo == 0.0) & (qv == 0.0))
+    )
+    return jnp.where(opens, 1.0, jnp.where(closes, 0.0, state.engine_on))
 
 
 class LOSGuidanceState(NamedTuple):
@@ -124,8 +153,10 @@ class LOSSwitchingCurveGuidance(AbstractImpactorGuidance):
         rho_close, rho_open = miss_limits(self.k1, self.k2, state.sigma_b_m, rho_n, nav, ctx)
         w_open = switching_curve(rho_n, rdot, rho_open)
         w_close = switching_curve(rho_n, rdot, rho_close)
-        temperature = self.temperature if self.relaxed else None
-        on = schmitt_trigger(omega, state.engine_on, w_open, w_close, temperature)
+        if self.relaxed:
+            on = schmitt_trigger(omega, state.engine_on, w_open, w_close, self.temperature)
+        else:
+            on = _hard_switch(rho, rho_dot, state, nav, self.k1, self.k2, ctx)
         on = jnp.where(t < ctx.cutoff_time_s, on, 0.0)
         # Eq. 19 up to sign: the zero-effort-miss direction -rho_dot x (rho_dot x rho) points
         # from the impactor to the closest-approach offset, so thrusting along it reduces |omega|.

@@ -210,3 +210,54 @@ def test_laws_are_differentiable_in_their_gains():
     assert float(g) == pytest.approx(float(fd), rel=1e-6)
     assert float(g) < 0.0  # a larger tolerance opens the engine less
     assert float(range_rate(jnp.asarray(-r), jnp.asarray(-v))) < 0
+
+
+def test_square_root_free_switch_decides_as_the_switching_curves():
+    """The hard LOS switch (multiplied-out squares) against schmitt_trigger on the rates of
+    eq. 20, over random geometries: closing and opening ranges, ranges inside the tolerance,
+    both previous states, and sigma_B small enough for the one-step resolution to bind."""
+    from gnc_jax.guidance.los import _hard_switch
+    from gnc_jax.guidance.trigger import schmitt_trigger
+
+    ctx = context()
+    rng = np.random.default_rng(3)
+    n = 4000
+    # LOS along x, the miss made by the transverse velocity below
+    rho = np.zeros((n, 3))
+    rho[:, 0] = 10.0 ** rng.uniform(2.0, np.log10(7e7), size=n)
+    rho_n = rho[:, 0]
+    sigma = 10.0 ** rng.uniform(-3, 4, size=n)
+    # Closing at 10.2 km/s with an unforced miss near the tolerances (k2 sigma_B, k1 sigma_B or
+    # the one-step resolution 0.118 m/s^2 x 1 s x t_go / 2), so that the decisions depend on
+    # each limit; some ranges opening, some slow.
+    resolution = 0.5 * 88.0 / 372.0 * rho_n / 1.02e4
+    limit = np.maximum(rng.choice([1.0, 4.0], size=n) * sigma, resolution)
+    miss = limit * 10.0 ** rng.uniform(-0.3, 0.3, size=n)
+    angle = rng.uniform(0.0, 2.0 * np.pi, size=n)
+    perpendicular = np.stack([np.cos(angle), np.sin(angle)], axis=1)
+    v = np.zeros((n, 3))
+    v[:, 0] = 1.02e4  # the impactor at r = -rho, moving towards the target
+    v[:, 1:] = (miss * 1.02e4 / rho_n)[:, None] * perpendicular
+    v[: n // 10] *= -1.0
+    v[n // 10 : n // 5] *= 1e-3
+    prev = rng.integers(0, 2, size=n).astype(float)
+    law = LOSSwitchingCurveGuidance(jnp.asarray(4.0), jnp.asarray(1.0))
+
+    def both(rho, v, sigma, prev):
+        nav = nav_at(-rho, v)  # aim point at the origin: rho = -r
+        state = LOSGuidanceState(jnp.asarray(prev), jnp.asarray(sigma), 0.0, 0.0, 0.0)
+        rho_dot = -nav.v
+        rho_n = jnp.linalg.norm(rho)
+        rdot = range_rate(rho, rho_dot)
+        omega = jnp.linalg.norm(los_rate(rho, rho_dot))
+        lo, hi = miss_limits(law.k1, law.k2, state.sigma_b_m, rho_n, nav, ctx)
+        ref = schmitt_trigger(
+            omega, state.engine_on, switching_curve(rho_n, rdot, hi), switching_curve(rho_n, rdot, lo)
+        )
+        return ref, _hard_switch(rho, rho_dot, state, nav, law.k1, law.k2, ctx)
+
+    ref, fast = jax.vmap(both)(jnp.asarray(rho), jnp.asarray(v), jnp.asarray(sigma), jnp.asarray(prev))
+    ref, fast = np.asarray(ref), np.asarray(fast)
+    # every kind of decision occurs: open, close and hold
+    assert 0.05 < ref.mean() < 0.95 and (ref != prev).any() and (ref == prev).any()
+    np.testing.assert_array_equal(fast, ref)
