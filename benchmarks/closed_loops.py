@@ -42,11 +42,21 @@ def _impactor_bare(sim):
 
     n = sim.n_images * sim.steps_per_image
 
+    # The engine firing all along (thrust along the B-plane T axis, its mass flow): the truth
+    # dynamics as the closed loop integrates it. Without thrust a gravity-free truth (the
+    # paper scenarios, RelativeDynamics.of) is a constant velocity, which XLA folds away.
+    thrust = sim.engine.thrust_n * sim.context.c_bi[1]
+    flow = sim.engine.mass_flow(1.0)
+
     def bare(r0):
         # The state carried by components (V3), the integrator's fastest form on XLA CPU
         # (3x the (batch, 3) carry): the limit is the best formulation, not ours.
-        y = ImpactorState(as_v3(r0), as_v3(sim.v0_mps), jnp.asarray(sim.mass_kg, float))
-        step = lambda y, _: (rk4(sim.dynamics, y, jnp.zeros(3), 0.0, sim.context.dt_s), None)
+        # every run its own velocity and mass (as in the closed loop), or XLA computes the
+        # shared parts once for the batch
+        d = r0 - sim.r0_m
+        v0 = sim.v0_mps + 1e-6 * d
+        y = ImpactorState(as_v3(r0), as_v3(v0), sim.mass_kg + 1e-6 * d[0])
+        step = lambda y, _: (rk4(sim.dynamics, y, thrust, flow, sim.context.dt_s), None)
         return as_array(jax.lax.scan(step, y, None, length=n)[0].r)
 
     return bare, n
