@@ -74,9 +74,7 @@ class RelativeDynamics(eqx.Module):
             s = self.sun_direction
             # By component: the Sun direction is shared by a batch (see _numerics.sub3).
             d = 3.0 * dot3(r, s)
-            g = g + self.tide_rate2 * jnp.stack(
-                [d * s[0] - r[0], d * s[1] - r[1], d * s[2] - r[2]]
-            )
+            g = g + self.tide_rate2 * jnp.stack([d * s[0] - r[0], d * s[1] - r[1], d * s[2] - r[2]])
         return g
 
     def gravity_components(self, x, y, z):

@@ -40,6 +40,11 @@ def switching_curve(rho, rho_dot_scalar, rho_limit):
     return jnp.where(ok, -rho_limit * rho_dot_scalar / jnp.sqrt(jnp.where(ok, arg, 1.0)), jnp.inf)
 
 
+def _resolution_per_tgo(ctx: ImpactorGuidanceContext):
+    """Half the miss one control step's burn moves, per second of time to go, m/s."""
+    return 0.5 * ctx.engine.thrust_n / ctx.mass_kg * ctx.dt_s
+
+
 def miss_limits(k1, k2, sigma_b, rho_n, nav, ctx: ImpactorGuidanceContext):
     """``(rho_min, rho_max)``: the shut-off and opening miss tolerances, k2 sigma_B and
     k1 sigma_B (seed 000 §3.3), neither below half the miss one control step's burn moves.
@@ -50,7 +55,7 @@ def miss_limits(k1, k2, sigma_b, rho_n, nav, ctx: ImpactorGuidanceContext):
     scenarios k2 sigma_B is larger (see the regression test of a zero-error run).
     """
     t_go = rho_n / safe_norm(nav.v)
-    resolution = 0.5 * ctx.engine.thrust_n / ctx.mass_kg * ctx.dt_s * t_go
+    resolution = _resolution_per_tgo(ctx) * t_go
     rho_min = jnp.maximum(k2 * sigma_b, resolution)
     return rho_min, jnp.maximum(k1 * sigma_b, rho_min)
 
@@ -71,7 +76,7 @@ def _hard_switch(rho, rho_dot, state, nav, k1, k2, ctx: ImpactorGuidanceContext)
     o = cross3(rho, rho_dot)
     oo = dot3(o, o)
     vv = dot3(nav.v, nav.v)
-    c = 0.5 * ctx.engine.thrust_n / ctx.mass_kg * ctx.dt_s
+    c = _resolution_per_tgo(ctx)
     resolution2 = c * c * rr / vv
     s2 = state.sigma_b_m * state.sigma_b_m
     close2 = jnp.maximum(k2 * k2 * s2, resolution2)
@@ -79,7 +84,8 @@ def _hard_switch(rho, rho_dot, state, nav, k1, k2, ctx: ImpactorGuidanceContext)
     closing = qv < 0.0
     opens = (rr > open2) & (~closing | (oo * (rr - open2) >= open2 * (qv * qv)))
     closes = (rr <= close2) | (
-        closing & (oo * (rr - close2) <= close2 * (qv * qv)) | (~closing & (oo == 0.0) & (qv == 0.0))
+        closing & (oo * (rr - close2) <= close2 * (qv * qv))
+        | (~closing & (oo == 0.0) & (qv == 0.0))
     )
     return jnp.where(opens, 1.0, jnp.where(closes, 0.0, state.engine_on))
 

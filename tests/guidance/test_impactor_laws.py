@@ -252,11 +252,16 @@ def test_square_root_free_switch_decides_as_the_switching_curves():
         omega = jnp.linalg.norm(los_rate(rho, rho_dot))
         lo, hi = miss_limits(law.k1, law.k2, state.sigma_b_m, rho_n, nav, ctx)
         ref = schmitt_trigger(
-            omega, state.engine_on, switching_curve(rho_n, rdot, hi), switching_curve(rho_n, rdot, lo)
+            omega,
+            state.engine_on,
+            switching_curve(rho_n, rdot, hi),
+            switching_curve(rho_n, rdot, lo),
         )
         return ref, _hard_switch(rho, rho_dot, state, nav, law.k1, law.k2, ctx)
 
-    ref, fast = jax.vmap(both)(jnp.asarray(rho), jnp.asarray(v), jnp.asarray(sigma), jnp.asarray(prev))
+    ref, fast = jax.vmap(both)(
+        jnp.asarray(rho), jnp.asarray(v), jnp.asarray(sigma), jnp.asarray(prev)
+    )
     ref, fast = np.asarray(ref), np.asarray(fast)
     # every kind of decision occurs: open, close and hold
     assert 0.05 < ref.mean() < 0.95 and (ref != prev).any() and (ref == prev).any()
