@@ -51,6 +51,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import gnc_jax as gj  # first: float64 and one XLA device per core
+import gnc_jax.simulation.impactor as _layout
 
 try:
     import numba
@@ -102,10 +103,10 @@ OUT_FIELDS = (
 )
 N_OUT = len(OUT_FIELDS)
 N_FIXED = 15  # per-run normals: delivery, knowledge position, velocity, attitude/accel biases
-# gnc_jax's layout (gnc_jax.simulation.impactor): normals per image, and the per-run table of
-# burn draws (rows, normals per row)
-IMAGE_DRAWS = 8
-N_BURN_INTERVALS, BURN_DRAWS = 64, 14
+# gnc_jax's layout: normals per image, and the per-run table of burn draws (rows, normals per
+# row), taken from gnc_jax so that the fed layout cannot drift from it
+IMAGE_DRAWS = _layout.IMAGE_DRAWS
+N_BURN_INTERVALS, BURN_DRAWS = _layout.N_BURN_INTERVALS, _layout.BURN_DRAWS
 STATUS_OK, STATUS_NAN, STATUS_PROPELLANT = (
     int(gj.Status.ok),
     int(gj.Status.nan),
