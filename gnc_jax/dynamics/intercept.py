@@ -91,6 +91,39 @@ def vector_field(t, y: InterceptState, args) -> InterceptState:
     return InterceptState(y.v_target, dynamics.sun_gravity(y.r_target), y.v, a_rel, -mass_flow)
 
 
+def drift_kick_drift_step(
+    dynamics: InterceptDynamics, y: InterceptState, thrust_vector_n, mass_flow, dt
+) -> InterceptState:
+    """One step of the closed loop's truth: drift half a step, kick with the acceleration at
+    the midpoint, drift again (Störmer-Verlet), for the target and the relative state alike.
+
+    One gravity evaluation per step instead of RK4's four. The field is this smooth: RK4's
+    truncation error over the guided 25 h is below the 1e-5 m rounding of a DOP853 reference
+    at every step from 1 s to 1800 s (``tests/dynamics/test_intercept.py``), and the
+    second-order step at the 1 s guidance step stays below 1e-3 m there too. Thrust held over
+    the step acts at the midpoint mass: exact for a constant mass (v dt + a dt^2 / 2), and off
+    by |a| (dm/m) dt^2 / 12 in position with the mass flowing (5e-9 m for a 5 % pulse of the
+    seed 004 engine). The target's own state needs no run's data, so under ``vmap`` its
+    midpoint and its solar gravity are computed once for the whole batch.
+    """
+    half = 0.5 * dt
+    r_target = y.r_target + half * y.v_target
+    r = y.r + half * y.v
+    sun_target = dynamics.sun_gravity(r_target)
+    m_mid = y.m - half * mass_flow
+    a_rel = (
+        dynamics.sun_gravity(r_target + r)
+        - sun_target
+        + dynamics.target_gravity(r)
+        + thrust_vector_n / m_mid
+    )
+    v_target = y.v_target + dt * sun_target
+    v = y.v + dt * a_rel
+    return InterceptState(
+        r_target + half * v_target, v_target, r + half * v, v, y.m - dt * mass_flow
+    )
+
+
 def propagate(
     dynamics: InterceptDynamics,
     y: InterceptState,

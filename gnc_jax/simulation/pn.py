@@ -4,8 +4,8 @@ One trajectory per call (`simulate`); Monte Carlo batches ``vmap`` it over per-r
 is mission time from the Table 2 initial state (s). Nested ``lax.scan`` loops: blocks of
 ``DRAW_BLOCK`` images (their normals drawn at once), the LOS-measurement interval (camera
 angles -> EKF update, in the packed form of ``navigation.packed_ekf``), and the guidance step
-(APN command -> Schmitt trigger -> pulse -> RK4 truth step of the heliocentric intercept
-dynamics -> EKF mean prediction; no loop when there is one step per image). Guidance stops
+(APN command -> Schmitt trigger -> pulse -> drift-kick-drift truth step of the heliocentric
+intercept dynamics -> EKF mean prediction; no loop when there is one step per image). Guidance stops
 ``coast_s`` before the nominal impact; the truth then coasts to the B-plane, where the miss is
 measured (aim: the target's centre).
 
@@ -40,7 +40,7 @@ from ..dynamics.intercept import (
     InterceptDynamics,
     InterceptState,
     coast_to_b_plane,
-    vector_field,
+    drift_kick_drift_step,
 )
 from ..geometry.bplane import b_plane_frame
 from ..geometry.kepler import OrbitalElements, elements_to_state
@@ -53,7 +53,6 @@ from ..guidance.apn import (
     closing_speed,
     pulse_train_estimate,
 )
-from ..integrate import rk4_step
 from ..navigation.camera import camera_attitude
 from ..navigation.ekf import MeasurementPrediction, NavEstimate
 from ..navigation.measurements import AbstractMeasurement, Exposure, GaussianLOSMeasurement
@@ -178,10 +177,6 @@ class _Carry(NamedTuple):
     on_prev: Scalar
     direction_prev: Vector3
     pointing_error: Float[Array, "2"]
-    first_pointing: Float[Array, "2"]  # pointing draws of the interval's first ignition
-    second_pointing: Float[Array, "2"]  # ... and of its later ignitions (a spare)
-    ignitions_image: Array  # int
-    spares_used: Array  # int
     dv_mps: Scalar
     firings: Array
     ignitions: Array
@@ -189,17 +184,21 @@ class _Carry(NamedTuple):
     last_firing_s: Scalar
 
 
-# Random streams: once per run the knowledge errors and a table of spare pointing draws; once
-# per block of DRAW_BLOCK images (stream _IMAGES, index = block) the normals of its images, one
-# row per kind of draw and one column per image: the LOS measurement noise (in-plane angle, and
-# the out-of-plane one in 3-D) and the pointing error of the interval's first ignition (one
-# angle about the orbit normal when planar, two in 3-D). A later ignition in the same interval
-# takes the next spare (cyclically, N_SPARES); nothing is drawn per guidance step. A block, not
-# an image, per draw: jax's threefry hash runs as a five-trip loop on CPU, whose fixed cost per
-# call is then shared by DRAW_BLOCK images.
-_KNOW_POS, _KNOW_VEL, _IMAGES, _SPARES, _FRONT_END = range(5)
+# Random streams: once per run the knowledge errors and a table of pointing errors, one row
+# per ignition (stream _IGNITIONS: the k-th ignition of the run takes row k, cyclically past
+# N_IGNITION_DRAWS; one angle about the orbit normal when planar, two in 3-D); once per block
+# of DRAW_BLOCK images (stream _IMAGES, index = block) the LOS measurement noise of its images,
+# one row per angle (the in-plane one, and the out-of-plane one in 3-D) and one column per
+# image. Nothing is drawn per guidance step, and only what a step uses: the paper scenario
+# ignites about 53 times in 91,200 steps, so drawing a pointing error at every image cost as
+# much as its measurement noise (8 ns of a 150 ns step). A block, not an image, per draw:
+# jax's threefry hash runs as a five-trip loop on CPU, whose fixed cost per call is then shared
+# by DRAW_BLOCK images.
+_KNOW_POS, _KNOW_VEL, _IMAGES, _IGNITIONS, _FRONT_END = range(5)
 DRAW_BLOCK = 64
-N_SPARES = 8
+N_IGNITION_DRAWS = 128
+"""Rows of the per-run pointing table (measured: at most 67 ignitions per run in 2000 runs of
+``bennu-apn``, 103 in 500 of ``bennu-apn-3d``); a run that ignites more reuses them in order."""
 
 
 class ImageDraws(NamedTuple):
@@ -207,12 +206,17 @@ class ImageDraws(NamedTuple):
     source; see ``simulation.impactor.image_draws``)."""
 
     measurement: Float[Array, "2"]  # LOS angle noise (out-of-plane angle: 0 when planar)
-    pointing: Float[Array, "2"]  # first ignition's pointing angles (second: 0 when planar)
 
 
 def draw_rows(planar: bool) -> int:
-    """Normals per image: planar runs draw only the in-plane measurement and pointing angle."""
-    return 2 if planar else 4
+    """Normals per image: planar runs draw only the in-plane measurement angle."""
+    return 1 if planar else 2
+
+
+def pointing_draws(key: PRNGKeyArray) -> Float[Array, "n 2"]:
+    """The run's table of ignition pointing normals, ``N_IGNITION_DRAWS`` rows (the second
+    column unused when planar)."""
+    return stream_normal(key, _IGNITIONS, (N_IGNITION_DRAWS, 2))
 
 
 def block_draws(key: PRNGKeyArray, block, planar: bool) -> Float[Array, "rows block"]:
@@ -226,9 +230,8 @@ def image_draws_of(column: tuple, planar: bool) -> ImageDraws:
     """The :class:`ImageDraws` of one column of :func:`block_draws` (float64)."""
     w = [c.astype(jnp.float64) for c in column]
     if planar:
-        zero = jnp.zeros_like(w[0])
-        return ImageDraws(jnp.stack([w[0], zero]), jnp.stack([w[1], zero]))
-    return ImageDraws(jnp.stack(w[:2]), jnp.stack(w[2:]))
+        return ImageDraws(jnp.stack([w[0], jnp.zeros_like(w[0])]))
+    return ImageDraws(jnp.stack(w))
 
 
 def _initial_nav(sim: PNSimulation, key):
@@ -246,8 +249,11 @@ def _initial_nav(sim: PNSimulation, key):
     return NavEstimate(x_hat, p0), know_pos, know_vel
 
 
-def _control_step(sim: PNSimulation, law: AugmentedPNGuidance, record, carry: _Carry, t):
-    """One guidance step: APN command -> Schmitt trigger -> pulse -> RK4 truth -> EKF mean."""
+def _control_step(
+    sim: PNSimulation, law: AugmentedPNGuidance, pointing_table, record, carry: _Carry, t
+):
+    """One guidance step: APN command -> Schmitt trigger -> pulse -> truth step
+    (``drift_kick_drift_step``) -> EKF mean."""
     ctx, err = sim.context, sim.errors
     dt = ctx.dt_s
     perfect = sim.nav_model == "perfect"
@@ -268,8 +274,7 @@ def _control_step(sim: PNSimulation, law: AugmentedPNGuidance, record, carry: _C
     command, law_state, g = computed_once(law_and_gravity, t, carry.law_state, navsol)
     on = law_state.engine_on
     ignition = (on > 0.5) & (carry.on_prev <= 0.5)
-    first = carry.ignitions_image == 0
-    fresh = err.attitude_rad * jnp.where(first, carry.first_pointing, carry.second_pointing)
+    fresh = err.attitude_rad * pointing_table[carry.ignitions % N_IGNITION_DRAWS]
     pointing = jnp.where(ignition, fresh, carry.pointing_error)
 
     def engine_and_truth(truth, d, throttle, pointing):
@@ -280,8 +285,7 @@ def _control_step(sim: PNSimulation, law: AugmentedPNGuidance, record, carry: _C
             direction = perturb_direction(d, pointing)
         thrust = throttle * sim.engine.thrust_n * direction
         flow = throttle * sim.engine.mass_flow(1.0)
-        args = (sim.dynamics, thrust, flow)
-        return direction, thrust, rk4_step(vector_field, 0.0, truth, dt, args)
+        return direction, thrust, drift_kick_drift_step(sim.dynamics, truth, thrust, flow, dt)
 
     direction, thrust, new_truth = computed_once(
         engine_and_truth, t, truth, command.direction, command.throttle, pointing
@@ -305,8 +309,6 @@ def _control_step(sim: PNSimulation, law: AugmentedPNGuidance, record, carry: _C
         on_prev=on,
         direction_prev=direction,
         pointing_error=pointing,
-        ignitions_image=carry.ignitions_image + ign,
-        spares_used=carry.spares_used + ign * (~first).astype(jnp.int32),
         dv_mps=carry.dv_mps + safe_norm(dv),
         firings=carry.firings + (ignition | reversal).astype(jnp.int32),
         ignitions=carry.ignitions + ign,
@@ -358,7 +360,9 @@ def take_image(
     return los_gain(r_hat, v_hat, p, h_r, meas.z - z_pred, r_var, angles, meas.valid)
 
 
-def _image_step(sim: PNSimulation, law: AugmentedPNGuidance, key, spares, record, carry, inputs):
+def _image_step(
+    sim: PNSimulation, law: AugmentedPNGuidance, key, pointing_table, record, carry, inputs
+):
     """One measurement interval: LOS image -> EKF update -> guidance steps -> covariance.
 
     ``inputs``: the image index and its column of :func:`block_draws` (one array per row)."""
@@ -369,11 +373,13 @@ def _image_step(sim: PNSimulation, law: AugmentedPNGuidance, key, spares, record
     t = i * image_dt
     w = image_draws_of(column, sim.planar)
     if not perfect:
-        k_img = stream_key(key, _FRONT_END, i)  # for front ends that draw (unused otherwise)
         # The gain once into memory; the covariance update then reads it in one elementwise
-        # pass with the propagation (P is not read by the guidance steps in between).
+        # pass with the propagation (P is not read by the guidance steps in between). The
+        # front end's key is derived inside the fenced branch, where XLA drops it when the
+        # front end draws nothing (derived outside, its two threefry hashes ran at every
+        # image: 15 ns of a 190 ns guidance step).
         gain = computed_once(  # live: the float time (an integer ``i == i`` folds to true)
-            lambda *a: take_image(sim, *a, k_img),
+            lambda *a: take_image(sim, *a, stream_key(key, _FRONT_END, i)),
             t,
             carry.r_hat,
             carry.v_hat,
@@ -383,13 +389,7 @@ def _image_step(sim: PNSimulation, law: AugmentedPNGuidance, key, spares, record
         )
         p = propagate_packed(apply_gain(carry.p, gain.terms), image_dt, sim.process_noise_m2s3)
         carry = carry._replace(r_hat=gain.r, v_hat=gain.v, p=p)
-    carry = carry._replace(first_pointing=w.pointing)
-    if sim.steps_per_image > 1:  # a second ignition in one interval: the next spare
-        carry = carry._replace(
-            second_pointing=spares[carry.spares_used % N_SPARES],
-            ignitions_image=jnp.zeros_like(carry.ignitions_image),
-        )
-    step = functools.partial(_control_step, sim, law, record)
+    step = functools.partial(_control_step, sim, law, pointing_table, record)
     if sim.steps_per_image == 1:  # one step per image: no inner loop (and its carry copies)
         carry, rec = step(carry, jnp.asarray(t, float))
         rec = jax.tree_util.tree_map(lambda x: x[None], rec)
@@ -435,9 +435,8 @@ def simulate(
         record: also return the guidance-rate :class:`PNRecord` trace (static).
     """
     nav0, know_pos, know_vel = _initial_nav(sim, key)
-    spares = stream_normal(key, _SPARES, (N_SPARES, 2))
+    pointing_table = pointing_draws(key)
     z = jnp.zeros(())
-    i0 = jnp.zeros((), jnp.int32)
     carry0 = _Carry(
         truth=sim.y0,
         r_hat=nav0.r,
@@ -447,17 +446,13 @@ def simulate(
         on_prev=z,
         direction_prev=jnp.zeros(3),
         pointing_error=jnp.zeros(2),
-        first_pointing=jnp.zeros(2),
-        second_pointing=jnp.zeros(2),
-        ignitions_image=i0,
-        spares_used=i0,
         dv_mps=z,
         firings=jnp.zeros((), jnp.int32),
         ignitions=jnp.zeros((), jnp.int32),
         pulses=jnp.zeros((), jnp.int32),
         last_firing_s=z,
     )
-    image_step = functools.partial(_image_step, sim, law, key, spares, record)
+    image_step = functools.partial(_image_step, sim, law, key, pointing_table, record)
     carry, rec = _image_blocks(sim, image_step, key, carry0)
 
     truth = carry.truth
