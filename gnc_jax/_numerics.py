@@ -112,8 +112,10 @@ def norm3(a: Vector3) -> Scalar:
 
 
 def matvec3(m: Matrix3, v: Vector3) -> Vector3:
-    """m @ v for a 3x3 matrix."""
-    return m[:, 0] * v[0] + m[:, 1] * v[1] + m[:, 2] * v[2]
+    """m @ v for a 3x3 matrix, row by row (the same sums as column by column, term for term:
+    the same bits; under ``vmap`` a row of a stacked matrix is a slice XLA fuses through,
+    a column was read back from a stored, transposed copy)."""
+    return jnp.stack([m[i, 0] * v[0] + m[i, 1] * v[1] + m[i, 2] * v[2] for i in range(3)])
 
 
 def matmul(a: Float[Array, "n k"], b: Float[Array, "k m"]) -> Float[Array, "n m"]:

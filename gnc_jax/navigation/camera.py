@@ -16,11 +16,18 @@ def camera_attitude(boresight: Vector3, up_hint: Vector3) -> Matrix3:
 
     ``up_hint`` fixes the roll: x_c is along up_hint x z_c (the B-plane R axis is used).
     """
+    return jnp.stack(camera_axes(boresight, up_hint))
+
+
+def camera_axes(boresight: Vector3, up_hint: Vector3) -> tuple[Vector3, Vector3, Vector3]:
+    """The rows (x_c, y_c, z_c) of :func:`camera_attitude`, unstacked: a caller that takes
+    products with each row keeps them in registers under ``vmap`` (the stacked (batch, 3, 3)
+    matrix is stored and read back with a transposed layout on XLA CPU)."""
     z = boresight / jnp.sqrt(dot3(boresight, boresight))
     x = cross3(up_hint, z)
     x = x / jnp.sqrt(dot3(x, x))
     y = cross3(z, x)
-    return jnp.stack([x, y, z])
+    return x, y, z
 
 
 def small_rotation(theta: Vector3) -> Matrix3:

@@ -31,7 +31,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._numerics import computed_once, cross3, dot3, matmul, matvec3, norm3, safe_norm
+from .._numerics import computed_once, cross3, dot3, matmul, norm3, safe_norm
 from .._random import stream_key, stream_normal
 from .._status import Status
 from .._types import Array, Float, Matrix3, PRNGKeyArray, Scalar, Vector3
@@ -53,7 +53,7 @@ from ..guidance.apn import (
     closing_speed,
     pulse_train_estimate,
 )
-from ..navigation.camera import camera_attitude
+from ..navigation.camera import camera_axes
 from ..navigation.ekf import MeasurementPrediction, NavEstimate
 from ..navigation.measurements import AbstractMeasurement, Exposure, GaussianLOSMeasurement
 from ..navigation.packed_ekf import (
@@ -67,7 +67,7 @@ from ..navigation.packed_ekf import (
     unpack,
 )
 from ..params import from_scenario, param
-from .base import flatten_trace, with_status
+from .base import flatten_trace, scan_in_blocks, with_status
 
 
 class PNErrors(eqx.Module):
@@ -342,22 +342,28 @@ def take_image(
     Returns the :class:`~gnc_jax.navigation.packed_ekf.LOSGain` (zero for a rejected image);
     the caller updates the covariance (``apply_gain``, fused with the propagation).
     """
-    c_cam = camera_attitude(-r_hat, sim.context.reference_normal)
+    # The camera's axes as three row vectors, each product written per row: the stacked
+    # matrix is built only for the front end's exposure (read row-wise it is never stored).
+    rows = camera_axes(-r_hat, sim.context.reference_normal)
+    c_cam = jnp.stack(rows)
     r_var = jnp.maximum(sim.errors.attitude_rad, 1e-9) ** 2
     # predict_los, written for the packed covariance (its S only for front ends that size a
     # region of interest with it: unused by the Gaussian one, and then never computed)
-    xc = matvec3(c_cam, -r_hat)
+    xc = [-dot3(row, r_hat) for row in rows]
     inv = 1.0 / xc[2]
-    z_pred = xc[:2] * inv
-    h_r = -(c_cam[:2] - z_pred[:, None] * c_cam[2][None, :]) * inv
+    z_pred = jnp.stack([xc[0] * inv, xc[1] * inv])
+    h_r = [-(rows[a] - (xc[a] * inv) * rows[2]) * inv for a in range(2)]
     p_rr = jnp.stack([jnp.stack([p[i, j] for j in range(3)]) for i in range(3)])
-    hj = jnp.concatenate([h_r, jnp.zeros((2, 3))], axis=1)
+    h_mat = jnp.stack(h_r)
+    hj = jnp.concatenate([h_mat, jnp.zeros((2, 3))], axis=1)
     r_cov = r_var * jnp.eye(2)
-    predicted = MeasurementPrediction(z_pred, hj, r_cov, matmul(matmul(h_r, p_rr), h_r.T) + r_cov)
+    s_cov = matmul(matmul(h_mat, p_rr), h_mat.T) + r_cov
+    predicted = MeasurementPrediction(z_pred, hj, r_cov, s_cov)
     nav = NavEstimate(jnp.concatenate([r_hat, v_hat]), unpack(p))
     meas = sim.measurement(Exposure(-r_true, c_cam, c_cam), nav, predicted, w, key)
     angles = 1 if sim.planar else 2
-    return los_gain(r_hat, v_hat, p, h_r, meas.z - z_pred, r_var, angles, meas.valid)
+    innovation = [meas.z[a] - xc[a] * inv for a in range(2)]
+    return los_gain(r_hat, v_hat, p, h_r, innovation, r_var, angles, meas.valid)
 
 
 def _image_step(
@@ -398,31 +404,6 @@ def _image_step(
     return carry, rec
 
 
-def _image_blocks(sim: PNSimulation, image_step, key, carry):
-    """All images: ``n_images // DRAW_BLOCK`` full blocks, then the remainder (if any), each
-    block drawing its normals once (:func:`block_draws`). Returns the carry and the trace
-    (image-major, None unless recording)."""
-
-    def block(carry, b, length=DRAW_BLOCK):
-        w = block_draws(key, b, sim.planar)
-        i = b * DRAW_BLOCK + jnp.arange(length)
-        columns = tuple(row[:length] for row in w)  # one array per row: contiguous per run
-        return jax.lax.scan(image_step, carry, (i, columns))
-
-    n_full, rest = divmod(sim.n_images, DRAW_BLOCK)
-    traces = []
-    if n_full:
-        carry, rec = jax.lax.scan(block, carry, jnp.arange(n_full))
-        traces.append(flatten_trace(rec))
-    if rest:
-        carry, rec = block(carry, jnp.asarray(n_full), rest)
-        traces.append(rec)
-    if traces[0] is None:
-        return carry, None
-    trace = jax.tree_util.tree_map(lambda *x: jnp.concatenate(x), *traces)
-    return carry, flatten_trace(trace)  # (images, steps per image) -> guidance steps
-
-
 def simulate(
     sim: PNSimulation, law: AugmentedPNGuidance, key: PRNGKeyArray, record: bool = False
 ) -> tuple[PNOutcome, PNRecord | None]:
@@ -453,7 +434,13 @@ def simulate(
         last_firing_s=z,
     )
     image_step = functools.partial(_image_step, sim, law, key, pointing_table, record)
-    carry, rec = _image_blocks(sim, image_step, key, carry0)
+
+    def block_inputs(b, length):  # the image indices and their normals, one array per row
+        w = block_draws(key, b, sim.planar)
+        return b * DRAW_BLOCK + jnp.arange(length), tuple(row[:length] for row in w)
+
+    carry, rec = scan_in_blocks(image_step, carry0, sim.n_images, DRAW_BLOCK, block_inputs)
+    rec = flatten_trace(rec)  # (images, steps per image) -> guidance steps
 
     truth = carry.truth
     b, t_rest = coast_to_b_plane(sim.dynamics, truth, sim.c_bi, sim.coast_steps)
