@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from gnc_jax.root_finding import RootStatus, bounded_regula_falsi
+from gnc_jax.root_finding import RootStatus, bounded_regula_falsi, regula_falsi
 
 
 def _sequential_reference(
@@ -391,3 +391,54 @@ def test_anderson_bjorck_beats_illinois_on_a_skip_like_range_error():
     assert int(ab.status) == int(illinois.status) == RootStatus.ok
     assert abs(float(ab.x) - float(illinois.x)) < 1e-6
     assert int(ab.n_evals_early_exit) < int(illinois.n_evals_early_exit)
+
+
+@pytest.mark.parametrize("secant", [False, True])
+def test_machine_driven_per_run_equals_the_vmapped_slots(secant):
+    """The :class:`RegulaFalsi` machine driven run by run (a Python loop that evaluates each
+    run's proposals until it is done, as a caller that advances every run on its own does)
+    gives the same solve as the vmapped fixed slots of :func:`bounded_regula_falsi`, on random
+    brackets, starts and (for the secant start) slopes: same root, evaluations, status and
+    slope; and the evaluations agree with the plain sequential reference."""
+    rng = np.random.default_rng(3)
+    n = 40
+    roots = rng.uniform(0.3, 2.8, n)
+    curvature = rng.uniform(0.0, 0.4, n)
+    x_prevs = np.clip(roots + rng.uniform(-1.0, 1.0, n), 0.0, math.pi)
+    slopes = -rng.uniform(0.5, 2.0, n) if secant else np.full(n, np.nan)
+    common = dict(step=0.15, lower=0.0, upper=math.pi, tol=1e-6, n_bracket=8, n_iter=8)
+
+    def f(x, root, k):  # decreasing, convex or not, the root inside [0, pi]
+        return -(x - root) - k * (x - root) ** 3
+
+    def slots(root, k, x_prev, slope):
+        return bounded_regula_falsi(
+            lambda x: f(x, root, k),
+            x_prev,
+            slope=slope if secant else None,
+            anderson_bjorck=secant,
+            **common,
+        )
+
+    batched = jax.jit(jax.vmap(slots))(roots, curvature, x_prevs, slopes)
+    for i in range(n):
+        solver = regula_falsi(**common, slope=slopes[i] if secant else None, anderson_bjorck=secant)
+        s = solver.init(x_prevs[i], None, jnp.zeros(()))
+        while not bool(solver.done(s)):
+            x, active = solver.propose(s)
+            assert bool(active)
+            s = solver.absorb(s, x, f(x, roots[i], curvature[i]), None, jnp.zeros(()))
+        one = solver.result(s)
+        for name in ("n_evals_early_exit", "status"):
+            np.testing.assert_array_equal(getattr(one, name), getattr(batched, name)[i])
+        for name in ("x", "f_x", "slope"):  # eager against compiled: the last bit may differ
+            np.testing.assert_allclose(
+                getattr(one, name), getattr(batched, name)[i], rtol=1e-12, atol=1e-12
+            )
+        if not secant:
+            f_np = lambda x, i=i: float(f(x, roots[i], curvature[i]))  # noqa: E731
+            x_ref, n_ref, status_ref = _sequential_reference(
+                f_np, x_prevs[i], **common, illinois=True, decreasing=True
+            )
+            assert int(one.n_evals_early_exit) == n_ref and int(one.status) == status_ref
+            assert float(one.x) == pytest.approx(x_ref, abs=1e-12)

@@ -133,10 +133,10 @@ def test_reference_lookup_interpolates_as_jnp_interp(law_and_ctx):
 
 
 def test_predictor_coast_step_costs_less_accuracy_than_the_corrector_tolerance(law_and_ctx):
-    """The predictor's coast steps (32 s below 0.02 g: the Kepler arc) against 8 s steps
+    """The predictor's coast steps (32 s below 0.02 g: the Kepler arc) against its 16 s steps
     throughout, at the states and the solutions of the corrector cycles of a flight: the
-    predicted range errors differ by less than the corrector's tolerance, with about half
-    the integration steps."""
+    predicted range errors differ by less than the corrector's tolerance, with about 30 %
+    fewer integration steps."""
     import dataclasses
 
     from gnc_jax.dynamics.entry import EntryState
@@ -168,7 +168,7 @@ def test_predictor_coast_step_costs_less_accuracy_than_the_corrector_tolerance(l
     np.testing.assert_array_equal(coarse[1], 0)  # every prediction ends at the switch point
     np.testing.assert_array_equal(reference[1], 0)
     assert float(jnp.max(jnp.abs(coarse[0] - reference[0]))) < float(law.range_tolerance_m)
-    assert int(jnp.sum(coarse[2])) < 0.6 * int(jnp.sum(reference[2]))
+    assert int(jnp.sum(coarse[2])) < 0.75 * int(jnp.sum(reference[2]))
 
 
 def test_levelling_off_at_the_dip_is_not_a_pull_up_nor_a_second_entry(law_and_ctx):
@@ -202,3 +202,119 @@ def test_levelling_off_at_the_dip_is_not_a_pull_up_nor_a_second_entry(law_and_ct
     fv = FlightVariables(jnp.asarray(9.0e3), jnp.asarray(0.0), 62_000.0, jnp.asarray(-30.0))
     phase, *_ = law._phase_events(state_climbed, fv, jnp.asarray(1.5), live)
     assert int(phase) == 3
+
+
+def _corrector_cycles(law_and_ctx, every=4):
+    """States of the corrector cycles of a flight (every ``every``-th), as batched inputs
+    of the predictor: (y, t, pulled up, sigma_0 of the cycle, model)."""
+    from gnc_jax.dynamics.entry import EntryState
+    from gnc_jax.guidance.entry_common import EntryModel
+
+    _, _, ctx = law_and_ctx
+    _, tr = gj.simulate_one(gj.load_scenario("lunar-skip-entry"), index=0, seed=0)
+    i = np.flatnonzero(tr.corrector_evals > 0)[::every]
+    c = ctx.model
+    model = jax.vmap(lambda d, l: EntryModel(c.vehicle, c.earth, c.atmosphere, d, l))(
+        jnp.asarray(tr.drag_ratio[i]), jnp.asarray(tr.lift_ratio[i])
+    )
+    y = EntryState(jnp.asarray(tr.r_m[i]), jnp.asarray(tr.v_mps[i]))
+    return y, jnp.asarray(tr.t_s[i]), jnp.asarray(tr.pulled_up[i]), tr.sigma_0_rad[i], model
+
+
+def test_corrector_rounds_equal_the_slot_wise_corrector(law_and_ctx):
+    """The corrector advances every run of a batch to its next prediction as soon as its own
+    ends (rounds of ROUND_STEPS predictor steps): at the cycles of a flight, batched (runs of
+    different prediction counts and lengths side by side), it returns what the corrector whose
+    k-th prediction is slot k of a fixed scan of predictions (``bounded_regula_falsi_with_aux``
+    of ``predict``) returns run by run: the same solution, predictions, steps and crossrange.
+    The starts are offset from the flown solutions so that every stage of the solve runs."""
+    from gnc_jax.root_finding import bounded_regula_falsi_with_aux
+
+    _, law, ctx = law_and_ctx
+    y, t, up, sigma, model = _corrector_cycles(law_and_ctx)
+    offsets = np.resize(np.radians([0.0, 2.0, -7.0, 12.0, -0.3]), len(sigma))
+    start = jnp.asarray(sigma + offsets)
+
+    def rounds(y, t, up, s0, m):
+        return law.correct(y, t, up, s0, m, ctx.target_fixed, jnp.asarray(True))
+
+    def slots(y, t, up, s0, m):
+        def miss(s, active):
+            p = law.predict(y, t, up, s, m, ctx.target_fixed, active)
+            return p.miss_m, p.crossrange_m, p.steps.astype(float)
+
+        return bounded_regula_falsi_with_aux(
+            miss,
+            s0,
+            law.bracket_step_rad,
+            law.bank_min_rad,
+            law.bank_max_rad,
+            law.range_tolerance_m,
+            law.n_bracket,
+            law.n_iter,
+        )
+
+    batched = jax.jit(jax.vmap(rounds))(y, t, up, start, model)
+    per_run = jax.jit(slots)
+    assert len(set(np.asarray(batched.n_evals_early_exit).tolist())) >= 3
+    for i in range(len(sigma)):
+        one = per_run(*jax.tree_util.tree_map(lambda a, i=i: a[i], (y, t, up, start, model)))
+        for name in ("n_evals_early_exit", "status", "cost"):
+            np.testing.assert_array_equal(getattr(batched, name)[i], getattr(one, name))
+        for name in ("x", "f_x", "aux", "slope"):
+            np.testing.assert_allclose(getattr(batched, name)[i], getattr(one, name), rtol=1e-9)
+
+
+def test_midpoint_bank_at_16_s_predicts_closer_to_fine_steps_than_the_held_bank_at_8_s(
+    law_and_ctx,
+):
+    """The predictor's default, the bank at the extrapolated mid-step speed with 16 s steps,
+    predicts the range errors of the cycles of a flight closer to those of 0.5 s steps than
+    the bank held over 8 s steps (a first-order error) does, with fewer steps."""
+    import dataclasses
+
+    _, law, ctx = law_and_ctx
+    assert law.predictor_bank == "midpoint" and law.predictor_dt_s == 16.0
+    y, t, up, sigma, model = _corrector_cycles(law_and_ctx)
+
+    def miss(variant):
+        def one(y, t, up, s0, m):
+            p = variant.predict(y, t, up, s0, m, ctx.target_fixed)
+            return p.miss_m, p.kind, p.steps
+
+        return jax.jit(jax.vmap(one))(y, t, up, jnp.asarray(sigma), model)
+
+    fine = dataclasses.replace(
+        law,
+        predictor_bank="step",
+        predictor_dt_s=0.5,
+        predictor_coast_dt_s=0.5,
+        predictor_max_steps=5000,
+    )
+    held = dataclasses.replace(law, predictor_bank="step", predictor_dt_s=8.0)
+    (m_f, k_f, _), (m_m, k_m, s_m), (m_h, k_h, s_h) = miss(fine), miss(law), miss(held)
+    np.testing.assert_array_equal(k_m, k_f)
+    np.testing.assert_array_equal(k_h, k_f)
+    rms = lambda e: float(jnp.sqrt(jnp.mean(e**2)))  # noqa: E731
+    assert rms(m_m - m_f) < 0.8 * rms(m_h - m_f)
+    assert int(jnp.sum(s_m)) < 0.75 * int(jnp.sum(s_h))
+
+
+def test_switch_point_is_smooth_in_the_bank(law_and_ctx):
+    """The range error along sigma_0 near a solution at the peak load (where it is steepest,
+    about 1000 km per degree) departs from a cubic by well under the corrector's 5 km
+    tolerance: the switch point is located inside the last 16 s step on the load's log-linear
+    crossing in altitude and the Hermite interpolant of the trajectory. (With the load
+    interpolated linearly in time the wiggles reach the tolerance, and the corrector fails to
+    converge in about 1 cycle of 3000.)"""
+    _, law, ctx = law_and_ctx
+    y, t, up, sigma, model = _corrector_cycles(law_and_ctx, every=1)
+    load = jax.vmap(lambda y, m: m.load_g(y))(y, model)
+    i = int(jnp.argmax(load))
+    pick = lambda a: a[i]  # noqa: E731
+    y, t, up, s0, m = jax.tree_util.tree_map(pick, (y, t, up, jnp.asarray(sigma), model))
+    d = jnp.radians(jnp.linspace(-0.2, 0.2, 201))
+    f = jax.jit(jax.vmap(lambda s: law.predict(y, t, up, s0 + s, m, ctx.target_fixed).miss_m))(d)
+    fit = np.polyval(np.polyfit(np.asarray(d), np.asarray(f), 3), np.asarray(d))
+    assert float(np.ptp(np.asarray(f))) > 100e3  # steep
+    assert float(np.max(np.abs(np.asarray(f) - fit))) < 1.5e3
