@@ -120,6 +120,27 @@ def estimate_cost(scenario: Scenario, runs: int | None = None, n_devices: int | 
     return CostEstimate(runs, float(steps), n_dev, per_device * steps * system.step_seconds)
 
 
+LANES = 8
+"""A device's batch of at least ``LANES_FROM`` runs is padded to a multiple of ``LANES``."""
+LANES_FROM = 64
+
+
+def padded_chunk(chunk: int, n_dev: int) -> int:
+    """Runs per compiled call for ``chunk`` requested on ``n_dev`` devices: a whole number of
+    runs per device and, from ``LANES_FROM`` runs per device on, a multiple of ``LANES``.
+
+    XLA on CPU vectorises a batch's elementwise loops over whole SIMD registers: a device
+    batch that is not a multiple of the vector width (4 float64 with AVX2) ran 1.6x slower
+    per run (``deep-impact-los``, 2 devices: 1668 runs per device 261 us per run, 1669 runs
+    415 us). The extra runs are computed with their own keys and dropped; no run's outcome
+    depends on the padding.
+    """
+    per_device = -(-chunk // n_dev)
+    if per_device >= LANES_FROM:
+        per_device = -(-per_device // LANES) * LANES
+    return per_device * n_dev
+
+
 def _physical_memory() -> int:
     try:
         return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
@@ -341,7 +362,7 @@ def run_study(
     if chunk_size is None:  # equal chunks: the last one is not mostly padding
         chunk = -(-runs // -(-runs // chunk))
     if not distributed:
-        chunk = -(-chunk // n_dev) * n_dev  # whole number of runs per device
+        chunk = padded_chunk(chunk, n_dev)
     n_chunks = -(-runs // chunk)
     bounds = [(c * chunk, min((c + 1) * chunk, runs)) for c in range(n_chunks)]
 
@@ -505,7 +526,7 @@ def run_chunk(scenario: Scenario, seed: int, start: int, stop: int, chunk: int):
         _BUILT[text] = build(scenario)
     sim, law = _BUILT[text]
     fn, n_dev = batch_function(system)
-    padded = -(-chunk // n_dev) * n_dev
+    padded = padded_chunk(chunk, n_dev)
     seed_arr = jnp.asarray(seed, dtype=jnp.uint32)
     compiled, compile_s = _compile(system, fn, n_dev, sim, law, seed_arr, padded)
     out = compiled(sim, law, seed_arr, jnp.arange(start, start + padded))

@@ -349,3 +349,20 @@ def test_a_long_study_announces_its_estimate_and_runs_in_chunks_with_progress(ca
     assert "estimated 40 runs x" in err
     assert study.chunk_size == 4
     assert study.summary()["failed"] == 0
+
+
+def test_device_batches_are_padded_to_whole_vectors_without_changing_a_run():
+    from gnc_jax.montecarlo import LANES, LANES_FROM, padded_chunk
+
+    assert padded_chunk(1, 2) == 2 and padded_chunk(7, 2) == 8  # small: whole runs per device
+    assert padded_chunk(2 * LANES_FROM - 2, 2) == 2 * LANES_FROM - 2  # 63 per device: as is
+    assert padded_chunk(3334, 2) == 3344 and padded_chunk(4096, 2) == 4096
+    assert padded_chunk(1001, 1) == 1008 and padded_chunk(1001, 1) % LANES == 0
+    # A padded study (130 runs: 65 per device -> 72) equals a loop of small, unpadded chunks.
+    scenario = gj.load_scenario(TOY)
+    padded = gj.run_study(scenario, runs=130, seed=5, progress=False)
+    assert padded.chunk_size == 144
+    small = gj.run_study(scenario, runs=130, seed=5, chunk_size=10, progress=False)
+    assert small.chunk_size == 10
+    for name, x in padded.outcomes.items():
+        np.testing.assert_allclose(x, small.outcomes[name], rtol=1e-12, atol=0, err_msg=name)

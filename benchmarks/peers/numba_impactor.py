@@ -8,7 +8,8 @@ scalar code inside (vectors as three floats, the 6x6 covariance in one array per
 allocated per step, and branches where the work is conditional (the engine fires in about 0.5 %
 of the control steps). Same truth (RK4 of the target's point-mass gravity + solar tide, thrust
 and mass flow held over the step), same camera and Gaussian LOS front end, same EKF (closed-form
-LOS Jacobian, Joseph update written out, straight-line covariance growth), same law (error
+LOS Jacobian, the two angles' scalar updates written out, straight-line covariance growth,
+attitude-error rotations from power series), same law (error
 ellipse at each image, switching curves of k1 and k2 sigma_B with the one-step floor, Schmitt
 trigger, zero-effort-miss thrust direction), same error sources and the same outcome (coast to
 the B-plane, miss, Δv, firings, fuel, status ``propellant``). Every number comes from
@@ -40,6 +41,7 @@ its image updates and its control steps off.
 
 import argparse
 import functools
+import math
 import os
 import pathlib
 import platform
@@ -257,28 +259,31 @@ def _rk4_coast(mu, tide, s0, s1, s2, x, y, z, vx, vy, vz, dt):
     )
 
 
+_SINC = tuple((-1) ** n / math.factorial(2 * n + 1) for n in range(16))
+_COSC = tuple((-1) ** n / math.factorial(2 * n + 2) for n in range(16))
+
+
+@njit(**_JIT)
+def _series(c, x):
+    acc = c[15]
+    for n in range(14, -1, -1):
+        acc = acc * x + c[n]
+    return acc
+
+
 @njit(**_JIT)
 def _small_rotation(t0, t1, t2, out):
-    """Rodrigues rotation matrix of the rotation vector (t0, t1, t2) into ``out`` (3x3)."""
-    angle = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2 + 1e-300)
-    k0, k1, k2 = t0 / angle, t1 / angle, t2 / angle
-    s, c1 = np.sin(angle), 1.0 - np.cos(angle)
-    d = 1.0 - c1
-    out[0, 0], out[0, 1], out[0, 2] = (
-        d + c1 * (k0 * k0),
-        -s * k2 + c1 * (k0 * k1),
-        s * k1 + c1 * (k0 * k2),
-    )
-    out[1, 0], out[1, 1], out[1, 2] = (
-        s * k2 + c1 * (k1 * k0),
-        d + c1 * (k1 * k1),
-        -s * k0 + c1 * (k1 * k2),
-    )
-    out[2, 0], out[2, 1], out[2, 2] = (
-        -s * k1 + c1 * (k2 * k0),
-        s * k0 + c1 * (k2 * k1),
-        d + c1 * (k2 * k2),
-    )
+    """Rotation matrix of the rotation vector (t0, t1, t2) into ``out`` (3x3):
+    cos(a) I + (sin(a)/a) [t x] + ((1 - cos a)/a^2) t t^T with both ratios as 16-term power
+    series in a^2 (``navigation.camera.small_rotation_entries``)."""
+    a2 = t0 * t0 + t1 * t1 + t2 * t2
+    s = _series(_SINC, a2)
+    c = _series(_COSC, a2)
+    d = 1.0 - c * a2
+    s0, s1, s2 = s * t0, s * t1, s * t2
+    out[0, 0], out[0, 1], out[0, 2] = d + c * t0 * t0, c * t0 * t1 - s2, c * t0 * t2 + s1
+    out[1, 0], out[1, 1], out[1, 2] = c * t1 * t0 + s2, d + c * t1 * t1, c * t1 * t2 - s0
+    out[2, 0], out[2, 1], out[2, 2] = c * t2 * t0 - s1, c * t2 * t1 + s0, d + c * t2 * t2
 
 
 @njit(**_JIT)
@@ -363,8 +368,7 @@ def _run(
     k1, k2 = prm[K1], prm[K2]
     resolution_rate = 0.5 * prm[CTX_THRUST] / prm[CTX_MASS] * dt  # miss per s of t_go per step
     sig_ctrl, sig_noise, sig_burn = prm[SIG_ATT_CONTROL], prm[SIG_ATT_NOISE], prm[SIG_BURN]
-    sigma_filter = np.sqrt(prm[SIG_IMAGE] * prm[SIG_IMAGE] + sig_noise * sig_noise)
-    r_meas = sigma_filter * sigma_filter
+    r_meas = prm[SIG_IMAGE] * prm[SIG_IMAGE] + sig_noise * sig_noise
     sig_front = prm[SIG_FRONT_END]
     acc_noise, acc_sig = prm[SIG_ACC_NOISE], prm[SIG_ACC_BIAS]
     sigma_dv = acc_noise * dt
@@ -399,7 +403,7 @@ def _run(
     pn = np.empty((6, 6))
     c_cmd, rot = np.empty((3, 3)), np.empty((3, 3))  # commanded attitude, a small rotation
     c_true, c_est = np.empty((3, 3)), np.empty((3, 3))  # true and believed camera attitude
-    pht, gain, ks = np.empty((6, 2)), np.empty((6, 2)), np.empty((6, 2))  # P H^T, K, K S
+    pht, gain = np.empty((6, 2)), np.empty((6, 2))  # u = P h^T and w = u / s per angle
 
     engine_on = 0.0
     sigma_b = _plan(prm, c_bi, p, 0.0, rh0, rh1, rh2, vh0, vh1, vh2)
@@ -450,13 +454,6 @@ def _run(
             h10 = -(c_est[1, 0] - zp1 * c_est[2, 0]) * inv
             h11 = -(c_est[1, 1] - zp1 * c_est[2, 1]) * inv
             h12 = -(c_est[1, 2] - zp1 * c_est[2, 2]) * inv
-            for r in range(6):
-                pht[r, 0] = p[r, 0] * h00 + p[r, 1] * h01 + p[r, 2] * h02
-                pht[r, 1] = p[r, 0] * h10 + p[r, 1] * h11 + p[r, 2] * h12
-            s00 = h00 * pht[0, 0] + h01 * pht[1, 0] + h02 * pht[2, 0] + r_meas + 1e-200
-            s01 = h00 * pht[0, 1] + h01 * pht[1, 1] + h02 * pht[2, 1]
-            s10 = h10 * pht[0, 0] + h11 * pht[1, 0] + h12 * pht[2, 0]
-            s11 = h10 * pht[0, 1] + h11 * pht[1, 1] + h12 * pht[2, 1] + r_meas + 1e-200
             # Measurement: true angles in the true camera frame + image-processing noise.
             t0 = -(c_true[0, 0] * x + c_true[0, 1] * y + c_true[0, 2] * z)
             t1 = -(c_true[1, 0] * x + c_true[1, 1] * y + c_true[1, 2] * z)
@@ -465,27 +462,38 @@ def _run(
             zm0, zm1 = zt0 + sig_front * w[0], zt1 + sig_front * w[1]
             los_error_sq += (zm0 - zt0) ** 2 + (zm1 - zt1) ** 2
             images_used += 1
-            # EKF update, Joseph form written out with S = H P H^T + R.
-            det = s00 * s11 - s01 * s10
-            i00, i01, i10, i11 = s11 / det, -s01 / det, -s10 / det, s00 / det
+            # EKF update as two scalar updates (``navigation.packed_ekf.los_gain``; R = r I):
+            # u = P h^T, s = h u + r, x += u nu / s, P -= u u^T / s; the second angle's u
+            # and innovation keep the prior's linearisation point (sa, sb: not the Sun's s1, s2).
             for r in range(6):
-                gain[r, 0] = pht[r, 0] * i00 + pht[r, 1] * i10
-                gain[r, 1] = pht[r, 0] * i01 + pht[r, 1] * i11
-                ks[r, 0] = gain[r, 0] * s00 + gain[r, 1] * s10
-                ks[r, 1] = gain[r, 0] * s01 + gain[r, 1] * s11
-            n0, n1 = zm0 - zp0, zm1 - zp1
-            rh0 += gain[0, 0] * n0 + gain[0, 1] * n1
-            rh1 += gain[1, 0] * n0 + gain[1, 1] * n1
-            rh2 += gain[2, 0] * n0 + gain[2, 1] * n1
-            vh0 += gain[3, 0] * n0 + gain[3, 1] * n1
-            vh1 += gain[4, 0] * n0 + gain[4, 1] * n1
-            vh2 += gain[5, 0] * n0 + gain[5, 1] * n1
+                pht[r, 0] = p[r, 0] * h00 + p[r, 1] * h01 + p[r, 2] * h02
+                pht[r, 1] = p[r, 0] * h10 + p[r, 1] * h11 + p[r, 2] * h12
+            sa = pht[0, 0] * h00 + pht[1, 0] * h01 + pht[2, 0] * h02 + r_meas + 1e-200
+            g1 = (zm0 - zp0) / sa
+            c12 = pht[0, 0] * h10 + pht[1, 0] * h11 + pht[2, 0] * h12
+            for r in range(6):
+                gain[r, 0] = pht[r, 0] / sa  # w1 = u1 / sa
+                pht[r, 1] = pht[r, 1] - gain[r, 0] * c12  # u2
+            sb = pht[0, 1] * h10 + pht[1, 1] * h11 + pht[2, 1] * h12 + r_meas + 1e-200
+            da, db, dc = pht[0, 0] * g1, pht[1, 0] * g1, pht[2, 0] * g1
+            g2 = ((zm1 - zp1) - (h10 * da + h11 * db + h12 * dc)) / sb
+            for r in range(6):
+                gain[r, 1] = pht[r, 1] / sb
+            rh0 += da
+            rh1 += db
+            rh2 += dc
+            vh0 += pht[3, 0] * g1
+            vh1 += pht[4, 0] * g1
+            vh2 += pht[5, 0] * g1
+            rh0 += pht[0, 1] * g2
+            rh1 += pht[1, 1] * g2
+            rh2 += pht[2, 1] * g2
+            vh0 += pht[3, 1] * g2
+            vh1 += pht[4, 1] * g2
+            vh2 += pht[5, 1] * g2
             for r in range(6):
                 for c in range(r, 6):
-                    v = p[r, c] + (
-                        (ks[r, 0] * gain[c, 0] - gain[r, 0] * pht[c, 0] - pht[r, 0] * gain[c, 0])
-                        + (ks[r, 1] * gain[c, 1] - gain[r, 1] * pht[c, 1] - pht[r, 1] * gain[c, 1])
-                    )
+                    v = p[r, c] - gain[r, 0] * pht[c, 0] - gain[r, 1] * pht[c, 1]
                     p[r, c] = v
                     p[c, r] = v
             sigma_b = _plan(prm, c_bi, p, t_img, rh0, rh1, rh2, vh0, vh1, vh2)

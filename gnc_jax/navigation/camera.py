@@ -5,6 +5,8 @@ coordinates on the focal plane are p = f x_c / z_c and l = f y_c / z_c (m). The 
 p/f and l/f (rad, tangent-plane angles) so that its numbers are well scaled.
 """
 
+import math
+
 import jax.numpy as jnp
 
 from .._numerics import cross3, dot3, matvec3
@@ -45,6 +47,55 @@ def small_rotation(theta: Vector3) -> Matrix3:
         ]
     )
     return jnp.eye(3) * (1.0 - c1) + s * kx + c1 * kk
+
+
+# Taylor coefficients of sin(a)/a and (1 - cos(a))/a^2 in a^2 (16 terms each): the series of
+# small_rotation_entries, exact to rounding (2e-15) for rotation angles up to pi.
+_SINC = tuple((-1) ** n / math.factorial(2 * n + 1) for n in range(16))
+_COSC = tuple((-1) ** n / math.factorial(2 * n + 2) for n in range(16))
+SERIES_ANGLE_MAX = math.pi
+"""Largest rotation angle (rad) for which :func:`small_rotation_entries` is exact to rounding."""
+
+
+def _horner(coefficients, x):
+    acc = coefficients[-1]
+    for c in reversed(coefficients[:-1]):
+        acc = acc * x + c
+    return acc
+
+
+def small_rotation_entries(theta: Vector3) -> tuple:
+    """The entries (row by row, a 3-tuple of 3-tuples of scalars) of :func:`small_rotation`,
+    from power series in |theta|^2: R = cos(a) I + (sin(a)/a) [theta x] + ((1 - cos a)/a^2)
+    theta theta^T, with sin(a)/a and (1 - cos a)/a^2 as 16-term series in a^2 = theta . theta.
+
+    No square root, division or trigonometric function: under ``vmap`` it is a few dozen
+    multiply-adds per run instead of a sqrt, a sin and a cos (measured 12 % of the impactor's
+    closed loop, which rotates twice per image). Exact to rounding (within 2e-15 of Rodrigues'
+    formula, tested against scipy) for angles up to ``SERIES_ANGLE_MAX`` = pi; use it for
+    attitude errors (the impactor's, at most 0.1 rad 1-sigma per axis, stay far below), and
+    :func:`small_rotation` for arbitrary rotations.
+    """
+    t = (theta[0], theta[1], theta[2])
+    a2 = t[0] * t[0] + t[1] * t[1] + t[2] * t[2]
+    s = _horner(_SINC, a2)
+    c = _horner(_COSC, a2)
+    d = 1.0 - c * a2  # cos(a)
+    st = (s * t[0], s * t[1], s * t[2])
+    return (
+        (d + c * t[0] * t[0], c * t[0] * t[1] - st[2], c * t[0] * t[2] + st[1]),
+        (c * t[1] * t[0] + st[2], d + c * t[1] * t[1], c * t[1] * t[2] - st[0]),
+        (c * t[2] * t[0] - st[1], c * t[2] * t[1] + st[0], d + c * t[2] * t[2]),
+    )
+
+
+def rotate_rows(entries: tuple, rows: tuple) -> tuple:
+    """The rows of R C for R given by its ``entries`` (row by row) and C by its ``rows``:
+    row i is sum_k R[i][k] C[k], in the order of :func:`~gnc_jax._numerics.matmul`."""
+    return tuple(
+        entries[i][1] * rows[1] + entries[i][2] * rows[2] + entries[i][0] * rows[0]
+        for i in range(3)
+    )
 
 
 def project(c_ci: Matrix3, los: Vector3, focal_length_m) -> Float[Array, "2"]:

@@ -26,8 +26,9 @@ from typing import NamedTuple
 
 import jax.numpy as jnp
 
+from .._numerics import dot3, matmul
 from .._types import Array, Covariance6, Float, Scalar, Vector3
-from .ekf import _S_FLOOR, _symmetric
+from .ekf import _S_FLOOR, MeasurementPrediction, _symmetric
 
 N_STATE = 6
 FULL = (0, 1, 2)
@@ -92,14 +93,17 @@ def unpack(pk: PackedCovariance) -> Covariance6:
     return _symmetric(lambda i, j: zero if (i, j) not in pk.index else pk[i, j], N_STATE)
 
 
-def propagate_packed(pk: PackedCovariance, dt, q_accel) -> PackedCovariance:
-    """P <- Phi P Phi^T + Q for straight-line motion over ``dt`` (``ekf.propagate_covariance``
-    with no accelerometer term), on the packed entries.
+def propagate_packed(pk: PackedCovariance, dt, q_accel, q_dv=None) -> PackedCovariance:
+    """P <- Phi P Phi^T + Q for straight-line motion over ``dt`` (``ekf.propagate_covariance``),
+    on the packed entries.
 
     With Phi = [[I, dt I], [0, I]]: P_rr += dt (P_rv + P_vr) + dt^2 P_vv, P_rv += dt P_vv;
-    Q of white acceleration q: dt^3/3 q, dt^2/2 q, dt q on the rr, rv, vv diagonals.
+    Q of white acceleration q: dt^3/3 q, dt^2/2 q, dt q on the rr, rv, vv diagonals, plus
+    ``q_dv`` (m^2/s^2 per axis, the accelerometer-measured Δv error) on the vv diagonal.
     """
     q_rr, q_rv, q_vv = q_accel * dt**3 / 3.0, q_accel * dt**2 / 2.0, q_accel * dt
+    if q_dv is not None:
+        q_vv = q_vv + q_dv
     out = []
     for i, j in pk.index:
         if j < 3:  # both position
@@ -114,16 +118,40 @@ def propagate_packed(pk: PackedCovariance, dt, q_accel) -> PackedCovariance:
     return PackedCovariance(tuple(out))
 
 
+def predict_los_packed(
+    rows: tuple, r_hat: Vector3, pk: PackedCovariance, r_var: Scalar
+) -> tuple[list, MeasurementPrediction]:
+    """``ekf.predict_los`` for a camera attitude given by its three ``rows`` and a packed
+    covariance: the Jacobian's position rows h_r (a list of two 3-vectors, for
+    :func:`los_gain`) and the :class:`~gnc_jax.navigation.ekf.MeasurementPrediction` with
+    R = ``r_var`` I. Its S is built only for front ends that size a region of interest with it
+    (unused by the Gaussian one, and then never computed)."""
+    xc = [-dot3(row, r_hat) for row in rows]
+    inv = 1.0 / xc[2]
+    z_pred = jnp.stack([xc[0] * inv, xc[1] * inv])
+    h_r = [-(rows[a] - (xc[a] * inv) * rows[2]) * inv for a in range(2)]
+    p_rr = jnp.stack([jnp.stack([pk[i, j] for j in range(3)]) for i in range(3)])
+    h_mat = jnp.stack(h_r)
+    hj = jnp.concatenate([h_mat, jnp.zeros((2, 3))], axis=1)
+    r_cov = r_var * jnp.eye(2)
+    s_cov = matmul(matmul(h_mat, p_rr), h_mat.T) + r_cov
+    return h_r, MeasurementPrediction(z_pred, hj, r_cov, s_cov)
+
+
 class LOSGain(NamedTuple):
     """The corrections of one LOS update before they are applied to the covariance.
 
     ``r``, ``v``: the updated mean; ``terms``: one (w, u) pair of 6-tuples per scalar update,
-    P <- P - sum w u^T (w = u / s); see :func:`los_gain`.
+    P <- P - sum w u^T (w = u / s); ``nis``: the normalised innovation squared
+    nu^T S^-1 nu of the angles taken, as the sum of the scalar updates' nu_a^2 / s_a (the
+    chi-square of a joint Gaussian decomposed along the sequence; computed also for a rejected
+    image); see :func:`los_gain`.
     """
 
     r: Vector3
     v: Vector3
     terms: tuple
+    nis: Scalar
 
 
 def los_gain(
@@ -147,7 +175,7 @@ def los_gain(
     rejected image) the gain is zero: the prior is kept.
     """
     axes, states = pk.axes, pk.states  # u, w: one entry per state carried, in this order
-    terms, dr, dv = [], jnp.zeros(3), jnp.zeros(3)
+    terms, dr, dv, nis = [], jnp.zeros(3), jnp.zeros(3), 0.0
     dot = lambda x, h: sum(x[n] * h[k] for n, k in enumerate(axes))  # noqa: E731
     for a in range(angles):
         h = h_r[a]
@@ -160,6 +188,7 @@ def los_gain(
         inv_s = 1.0 / s
         nu = innovation[a] - sum(h[k] * dr[k] for k in axes)
         gain = nu * inv_s
+        nis = nis + nu * gain
         zero = jnp.zeros_like(gain)
         full = {i: ui * gain for i, ui in zip(states, u)}
         dr = dr + jnp.stack([full.get(k, zero) for k in range(3)])
@@ -169,7 +198,7 @@ def los_gain(
         keep = lambda a: jnp.where(valid, a, jnp.zeros_like(a))  # noqa: E731
         dr, dv = keep(dr), keep(dv)
         terms = [(tuple(keep(wi) for wi in w), u) for w, u in terms]
-    return LOSGain(r + dr, v + dv, tuple(terms))
+    return LOSGain(r + dr, v + dv, tuple(terms), nis)
 
 
 def apply_gain(pk: PackedCovariance, terms: tuple) -> PackedCovariance:
@@ -214,6 +243,7 @@ __all__ = [
     "los_update",
     "pack",
     "packed_index",
+    "predict_los_packed",
     "propagate_packed",
     "LOSGain",
     "apply_gain",

@@ -15,7 +15,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._numerics import V3, as_array, as_v3, computed_once, matmul, matvec3, safe_norm
+from .._numerics import V3, as_array, as_v3, computed_once, matmul, matvec3
 from .._random import stream_key, stream_normal
 from .._status import Status
 from .._types import Array, Float, PRNGKeyArray, Scalar, Vector3
@@ -32,15 +32,11 @@ from ..geometry.bplane import b_plane_frame, check_b_plane_frame
 from ..geometry.ellipse import b_plane_position_covariance, mean_position_error
 from ..geometry.silhouette import focusing_factor, silhouette_matrix, silhouette_ratio
 from ..guidance.base import AbstractImpactorGuidance, ImpactorGuidanceContext
-from ..navigation.camera import camera_attitude, small_rotation
+from ..navigation.camera import camera_axes, rotate_rows, small_rotation_entries
 from ..navigation.ekf import (
     NIS_BOUND_2DOF,
     NavEstimate,
-    ekf_update,
     navigation_lost,
-    normalised_innovation_squared,
-    predict_los,
-    propagate_covariance,
 )
 from ..navigation.measurements import (
     AbstractMeasurement,
@@ -50,6 +46,16 @@ from ..navigation.measurements import (
     camera_model,
     measurement_class,
     target_model,
+)
+from ..navigation.packed_ekf import (
+    LOSGain,
+    PackedCovariance,
+    apply_gain,
+    los_gain,
+    pack,
+    predict_los_packed,
+    propagate_packed,
+    unpack,
 )
 from ..navigation.render import CameraModel, TargetModel
 from ..params import from_scenario, param
@@ -258,13 +264,15 @@ class _Carry(NamedTuple):
     Vectors that the control step reads are carried whole: the estimate as ``r_hat``,
     ``v_hat`` (not one 6-vector), the execution error as magnitude and pointing. Under
     ``vmap`` a slice of a carried (batch, 6) array along its short axis is a strided read that
-    XLA on CPU does not vectorise (measured 5x slower for the LOS step).
+    XLA on CPU does not vectorise (measured 5x slower for the LOS step). The covariance is
+    carried as its 21 unique entries, each a contiguous batch vector (``navigation.packed_ekf``:
+    the dense (batch, 6, 6) update measured half the image step's time).
     """
 
     truth: ImpactorState
     r_hat: Vector3
     v_hat: Vector3
-    p: Float[Array, "6 6"]
+    p: PackedCovariance
     law_state: tuple
     throttle_prev: Scalar
     exec_magnitude: Scalar  # standard normal of the current firing's magnitude error
@@ -275,7 +283,7 @@ class _Carry(NamedTuple):
     second_pointing: Vector3
     ignitions_image: Array  # int, ignitions since the last image
     burn_intervals: Array  # int, image intervals so far in which the engine fired
-    accel_moments: Float[Array, "3"]  # sum of throttle^2 * (1, c, c^2) over the interval
+    accel_moments: tuple  # 3 scalars: sums of throttle^2 * (1, c, c^2) over the interval
     dv_mps: Scalar
     firings: Array
     burn_time_s: Scalar
@@ -286,10 +294,7 @@ class _Carry(NamedTuple):
 
     @property
     def nav(self) -> NavEstimate:
-        return NavEstimate(jnp.concatenate([self.r_hat, self.v_hat]), self.p)
-
-    def with_nav(self, nav: NavEstimate) -> "_Carry":
-        return self._replace(r_hat=nav.r, v_hat=nav.v, p=nav.p)
+        return NavEstimate(jnp.concatenate([self.r_hat, self.v_hat]), unpack(self.p))
 
 
 # Random streams (gnc_jax._random): each kind of draw has its own stream, so adding a kind
@@ -392,29 +397,71 @@ def initial_conditions(sim: ImpactorSimulation, key: PRNGKeyArray):
     return truth, NavEstimate(x_hat, p0), draws
 
 
+def camera_attitudes(sim: ImpactorSimulation, r_hat: Vector3, attitude_bias_rad, w) -> tuple:
+    """``(c_true, c_est)``, each the three rows of a camera attitude C_cI: the camera pointed
+    at the estimated target direction with attitude-control error (``w[2:5]``), and the
+    attitude the navigation believes (bias + knowledge error ``w[5:8]``).
+
+    The attitude errors' rotations come from power series (``small_rotation_entries``: no
+    trigonometry), composed row by row.
+    """
+    err = sim.errors
+    cmd = camera_axes(-r_hat, sim.context.c_bi[2])
+    c_true = rotate_rows(small_rotation_entries(err.attitude_control_rad * w[2:5]), cmd)
+    knowledge = attitude_bias_rad + err.attitude_noise_rad * w[5:8]
+    return c_true, rotate_rows(small_rotation_entries(knowledge), c_true)
+
+
+def image_update(
+    sim: ImpactorSimulation,
+    r_hat: Vector3,
+    v_hat: Vector3,
+    p: PackedCovariance,
+    r_true: Vector3,
+    attitudes: tuple,
+    w,
+    key,
+) -> tuple[LOSGain, Measurement]:
+    """One image and the gain of its EKF update (seed 002 §3.2), on the packed covariance:
+    the :class:`~gnc_jax.navigation.packed_ekf.LOSGain` (updated mean, covariance terms for
+    ``apply_gain``, NIS; zero gain for a rejected image) and the measurement.
+
+    ``attitudes``: the true and believed camera attitudes (:func:`camera_attitudes`). The
+    filter interprets the image through its attitude estimate, with the image-processing and
+    attitude noise as its measurement noise (sigma^2 = sigma_ip^2 + sigma_att^2 per angle,
+    independent). The front end (``sim.measurement``) sees the truth and the filter's
+    prediction. ``w``: the image's two measurement normals; ``key``: for front ends that draw
+    more (the renderer).
+
+    The same filter as :func:`~gnc_jax.navigation.ekf.ekf_update` of
+    :func:`~gnc_jax.navigation.ekf.predict_los` (its Joseph-form update is the reference the
+    tests hold this to), written for batched CPU execution: the camera attitudes as row
+    vectors, the update as two scalar updates on the 21 packed entries
+    (``navigation.packed_ekf``).
+    """
+    err = sim.errors
+    c_true, c_est = attitudes
+    r_var = err.image_processing_rad**2 + err.attitude_noise_rad**2
+    # predict_los through the believed attitude, row by row.
+    h_r, predicted = predict_los_packed(c_est, r_hat, p, r_var)
+    exposure = Exposure(-r_true, jnp.stack(c_true), jnp.stack(c_est))
+    nav = NavEstimate(jnp.concatenate([r_hat, v_hat]), unpack(p))
+    meas = sim.measurement(exposure, nav, predicted, w, key)
+    innovation = [meas.z[a] - predicted.z[a] for a in range(2)]
+    return los_gain(r_hat, v_hat, p, h_r, innovation, r_var, 2, meas.valid), meas
+
+
 def take_image(
     sim: ImpactorSimulation, nav: NavEstimate, r_true: Vector3, attitude_bias_rad, w, key
 ) -> tuple[NavEstimate, Measurement, Scalar]:
-    """One image and its EKF update (seed 002 §3.2): the updated estimate, the measurement and
-    its normalised innovation squared (NIS, against the innovation covariance).
-
-    The camera is pointed at the estimated target direction with attitude-control error; the
-    filter interprets the image through its attitude estimate (bias + random error), with the
-    image-processing and attitude noise as its measurement noise. The front end
-    (``sim.measurement``) sees the truth and the filter's prediction; a rejected image leaves
-    the estimate unchanged. ``w``: the image's standard normals (2 measurement, 3 attitude
-    control, 3 attitude knowledge); ``key``: for front ends that draw more (the renderer).
-    """
-    err = sim.errors
-    c_cmd = camera_attitude(-nav.r, sim.context.c_bi[2])
-    c_true = matmul(small_rotation(err.attitude_control_rad * w[2:5]), c_cmd)
-    c_est = matmul(small_rotation(attitude_bias_rad + err.attitude_noise_rad * w[5:8]), c_true)
-    sigma = jnp.sqrt(err.image_processing_rad**2 + err.attitude_noise_rad**2)
-    predicted = predict_los(nav, c_est, sigma**2 * jnp.eye(2))
-    exposure = Exposure(-r_true, c_true, c_est)
-    meas = sim.measurement(exposure, nav, predicted, w[:2], key)
-    nav, innovation = ekf_update(nav, meas.z, predicted, meas.valid)
-    return nav, meas, normalised_innovation_squared(innovation, predicted.s)
+    """:func:`image_update` on a dense estimate: the updated estimate, the measurement and
+    its normalised innovation squared (NIS, against the innovation covariance); a rejected
+    image leaves the estimate unchanged."""
+    p = pack(nav.p)
+    attitudes = camera_attitudes(sim, nav.r, attitude_bias_rad, w)
+    gain, meas = image_update(sim, nav.r, nav.v, p, r_true, attitudes, w[:2], key)
+    x = jnp.concatenate([gain.r, gain.v])
+    return NavEstimate(x, unpack(apply_gain(p, gain.terms))), meas, gain.nis
 
 
 def _accel_noise(sigma_dv, moments, u):
@@ -489,13 +536,17 @@ def _control_step(sim: ImpactorSimulation, law, accel_bias, record, carry: _Carr
     )
     # The accelerometer integrates the non-gravitational Δv while the engine fires; its white
     # noise reaches the estimate at the end of the interval (_accel_noise).
-    dv_true = thrust * (dt / (0.5 * (carry.truth.m + truth.m)))
+    per_mass = dt / (0.5 * (carry.truth.m + truth.m))
+    dv_true = thrust * per_mass
+    # |dv_true| without a square root: the tilted direction is a unit vector.
+    magnitude = sim.engine.thrust_n * (1.0 + err.burn_magnitude_frac * exec_magnitude)
+    dv_norm = (throttle * magnitude) * per_mass
     dv_meas = dv_true + (throttle * dt) * accel_bias
     # Straight-line mean propagation with the measured Δv applied uniformly (propagate_state).
     r_hat = carry.r_hat + carry.v_hat * dt + dv_meas * (0.5 * dt)
     v_hat = carry.v_hat + dv_meas
     th2 = throttle * throttle
-    ign = ignition.astype(carry.firings.dtype)
+    ign = ignition.astype(carry.ignitions_image.dtype)
     new = carry._replace(
         truth=truth,
         r_hat=r_hat,
@@ -505,10 +556,12 @@ def _control_step(sim: ImpactorSimulation, law, accel_bias, record, carry: _Carr
         exec_magnitude=exec_magnitude,
         exec_pointing=exec_pointing,
         ignitions_image=carry.ignitions_image + ign,
-        accel_moments=carry.accel_moments + jnp.stack([th2, th2 * c_k, th2 * c_k * c_k]),
-        dv_mps=carry.dv_mps + safe_norm(dv_true),
-        firings=carry.firings + ign,
-        burn_time_s=carry.burn_time_s + throttle * dt,
+        accel_moments=(
+            carry.accel_moments[0] + th2,
+            carry.accel_moments[1] + th2 * c_k,
+            carry.accel_moments[2] + th2 * c_k * c_k,
+        ),
+        dv_mps=carry.dv_mps + dv_norm,
         burn_time_image_s=carry.burn_time_image_s + throttle * dt,
     )
     rec = None
@@ -524,31 +577,46 @@ def _image_step(sim: ImpactorSimulation, law, key, draws, burns, record, carry: 
     dt = ctx.dt_s
     n = sim.steps_per_image
     t = i * ctx.image_interval_s
-    k_img = stream_key(key, _IMAGES, i)
-    # The image's work is left to XLA's fusion: fencing it (computed_once) measured 10 %
-    # slower for the whole loop, unlike the control step's law and truth. Its normals are
-    # fenced: each is drawn once, not once per consumer (measured 2-5 % of the loop).
-    w = computed_once(image_draws, t, key, i)
     bias = draws["attitude_bias_rad"]
-    k_frame = jax.random.fold_in(k_img, 1)
 
-    def image_and_plan(nav, r_true, law_state, w):
-        nav, meas, nis = take_image(sim, nav, r_true, bias, w[:8], k_frame)
-        return nav, meas, nis, law.plan(law_state, nav, t, ctx)
+    # The image's normals and the camera attitudes they set, computed once into memory: left
+    # to fusion, XLA recomputes a value in every consumer's loop, and the attitudes' products
+    # feed every entry of the filter update (measured 4x the image step's time). The update
+    # itself is fenced for the same reason (its gain feeds the 21 covariance entries); the
+    # front end's key is derived inside it, where XLA drops it when the front end draws
+    # nothing (the Gaussian one).
+    def draws_and_attitudes(r_hat):
+        w = image_draws(key, i)
+        return w, camera_attitudes(sim, r_hat, bias, w)
 
-    nav, meas, nis, law_state = image_and_plan(carry.nav, carry.truth.r, carry.law_state, w)
-    outside = (meas.valid & (nis > NIS_BOUND_2DOF)).astype(carry.innovations_outside.dtype)
+    w, attitudes = computed_once(draws_and_attitudes, t, carry.r_hat)
+    gain, meas = computed_once(
+        lambda *a: image_update(sim, *a, w[:2], jax.random.fold_in(stream_key(key, _IMAGES, i), 1)),
+        t,
+        carry.r_hat,
+        carry.v_hat,
+        carry.p,
+        carry.truth.r,
+        attitudes,
+    )
+    p = apply_gain(carry.p, gain.terms)
+    nav = NavEstimate(jnp.concatenate([gain.r, gain.v]), unpack(p))
+    law_state = law.plan(carry.law_state, nav, t, ctx)
+    outside = (meas.valid & (gain.nis > NIS_BOUND_2DOF)).astype(carry.innovations_outside.dtype)
     los_error_sq = jnp.where(meas.valid, jnp.sum((meas.z - meas.z_true) ** 2), 0.0)
     z = jnp.zeros(())
     row = burns[carry.burn_intervals % N_BURN_INTERVALS]
-    carry = carry.with_nav(nav)._replace(
+    carry = carry._replace(
+        r_hat=gain.r,
+        v_hat=gain.v,
+        p=p,
         law_state=law_state,
         first_magnitude=row[0],
         first_pointing=row[1:4],
         second_magnitude=row[4],
         second_pointing=row[5:8],
         ignitions_image=jnp.zeros_like(carry.ignitions_image),
-        accel_moments=jnp.zeros(3),
+        accel_moments=(z, z, z),
         burn_time_image_s=z,
         los_error_sq=carry.los_error_sq + los_error_sq,
         images_used=carry.images_used + meas.valid.astype(carry.images_used.dtype),
@@ -568,12 +636,15 @@ def _image_step(sim: ImpactorSimulation, law, key, draws, burns, record, carry: 
     # Covariance: straight-line growth over the interval plus the accelerometer's Δv error.
     tb = carry.burn_time_image_s
     q_dv = err.accel_noise_mps2**2 * dt * tb + err.accel_bias_mps2**2 * tb**2
-    p = propagate_covariance(carry.p, ctx.image_interval_s, sim.process_noise_m2s3, q_dv)
+    p = propagate_packed(carry.p, ctx.image_interval_s, sim.process_noise_m2s3, q_dv)
     return carry._replace(
         r_hat=carry.r_hat + dr,
         v_hat=carry.v_hat + dv,
         p=p,
         burn_intervals=carry.burn_intervals + burned.astype(carry.burn_intervals.dtype),
+        # the interval's totals (fewer outputs per control step: each is a kernel)
+        firings=carry.firings + carry.ignitions_image,
+        burn_time_s=carry.burn_time_s + tb,
     ), rec
 
 
@@ -663,7 +734,7 @@ def simulate(
         truth=truth0,
         r_hat=nav0.r,
         v_hat=nav0.v,
-        p=nav0.p,
+        p=pack(nav0.p),
         law_state=law.init(nav0, sim.context),
         throttle_prev=z,
         exec_magnitude=z,
@@ -674,7 +745,7 @@ def simulate(
         second_pointing=z3,
         ignitions_image=i0,
         burn_intervals=i0,
-        accel_moments=jnp.zeros(3),
+        accel_moments=(z, z, z),
         dv_mps=z,
         firings=jnp.zeros((), jnp.int32),
         burn_time_s=z,

@@ -31,7 +31,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._numerics import computed_once, cross3, dot3, matmul, norm3, safe_norm
+from .._numerics import computed_once, cross3, dot3, norm3, safe_norm
 from .._random import stream_key, stream_normal
 from .._status import Status
 from .._types import Array, Float, Matrix3, PRNGKeyArray, Scalar, Vector3
@@ -54,7 +54,7 @@ from ..guidance.apn import (
     pulse_train_estimate,
 )
 from ..navigation.camera import camera_axes
-from ..navigation.ekf import MeasurementPrediction, NavEstimate
+from ..navigation.ekf import NavEstimate
 from ..navigation.measurements import AbstractMeasurement, Exposure, GaussianLOSMeasurement
 from ..navigation.packed_ekf import (
     FULL,
@@ -63,6 +63,7 @@ from ..navigation.packed_ekf import (
     apply_gain,
     los_gain,
     pack,
+    predict_los_packed,
     propagate_packed,
     unpack,
 )
@@ -347,22 +348,11 @@ def take_image(
     rows = camera_axes(-r_hat, sim.context.reference_normal)
     c_cam = jnp.stack(rows)
     r_var = jnp.maximum(sim.errors.attitude_rad, 1e-9) ** 2
-    # predict_los, written for the packed covariance (its S only for front ends that size a
-    # region of interest with it: unused by the Gaussian one, and then never computed)
-    xc = [-dot3(row, r_hat) for row in rows]
-    inv = 1.0 / xc[2]
-    z_pred = jnp.stack([xc[0] * inv, xc[1] * inv])
-    h_r = [-(rows[a] - (xc[a] * inv) * rows[2]) * inv for a in range(2)]
-    p_rr = jnp.stack([jnp.stack([p[i, j] for j in range(3)]) for i in range(3)])
-    h_mat = jnp.stack(h_r)
-    hj = jnp.concatenate([h_mat, jnp.zeros((2, 3))], axis=1)
-    r_cov = r_var * jnp.eye(2)
-    s_cov = matmul(matmul(h_mat, p_rr), h_mat.T) + r_cov
-    predicted = MeasurementPrediction(z_pred, hj, r_cov, s_cov)
+    h_r, predicted = predict_los_packed(rows, r_hat, p, r_var)
     nav = NavEstimate(jnp.concatenate([r_hat, v_hat]), unpack(p))
     meas = sim.measurement(Exposure(-r_true, c_cam, c_cam), nav, predicted, w, key)
     angles = 1 if sim.planar else 2
-    innovation = [meas.z[a] - xc[a] * inv for a in range(2)]
+    innovation = [meas.z[a] - predicted.z[a] for a in range(2)]
     return los_gain(r_hat, v_hat, p, h_r, innovation, r_var, angles, meas.valid)
 
 

@@ -300,6 +300,12 @@ class ImpactorSystem(AbstractSystem):
     # an image costs IMAGE_STEPS control steps with the Gaussian front end and, with rendered
     # frames, more in proportion to the rays traced and the labelling sweeps.
     step_seconds: ClassVar[float] = 1.1e-6
+    # Measured on deep-impact-los, 2 devices (benchmarks/closed_loops.py): 1024 runs per call
+    # (512 per device) 427 us per run, 4096 (2048 per device) 334, 8192 350; on one device
+    # 512 runs 635 us, 1024-2048 560, 4096 578 (a device's batch below ~1000 runs pays the
+    # per-operation overhead of its ~40 kernels per step, above ~2000 its working set
+    # outgrows the 1 MB L2 cache).
+    chunk_per_device: ClassVar[int] = 2048
     IMAGE_STEPS: ClassVar[float] = 2.0
     RENDER_STEPS: ClassVar[float] = 230.0  # per image, at the default camera (32 rays, ROI 32)
 

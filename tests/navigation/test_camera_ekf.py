@@ -15,6 +15,7 @@ from gnc_jax.navigation import (
     small_rotation,
     update_los,
 )
+from gnc_jax.navigation.camera import SERIES_ANGLE_MAX, rotate_rows, small_rotation_entries
 from gnc_jax.simulation.impactor import attitude_bias_covariance
 
 
@@ -28,6 +29,29 @@ def test_small_rotation_matches_scipy():
             atol=1e-15,
         )
     np.testing.assert_allclose(np.asarray(small_rotation(jnp.zeros(3))), np.eye(3))
+
+
+def test_series_rotation_matches_scipy_up_to_pi():
+    # small_rotation_entries (power series, no trigonometry) against scipy's rotation vectors,
+    # from 1e-9 rad to its stated limit of pi; beyond it the truncated series drifts (shown).
+    rng = np.random.default_rng(3)
+    for angle in (1e-9, 1e-4, 0.01, 0.3, 1.0, 2.0, 3.0, SERIES_ANGLE_MAX):
+        for _ in range(20):
+            axis = rng.normal(size=3)
+            theta = angle * axis / np.linalg.norm(axis)
+            got = np.array(small_rotation_entries(jnp.asarray(theta)), dtype=float)
+            np.testing.assert_allclose(got, Rotation.from_rotvec(theta).as_matrix(), atol=3e-15)
+    theta = np.array([0.0, 0.0, 12.0])
+    far = np.array(small_rotation_entries(jnp.asarray(theta)), dtype=float)
+    assert np.abs(far - Rotation.from_rotvec(theta).as_matrix()).max() > 1e-4
+    rows = tuple(jnp.asarray(r) for r in rng.normal(size=(3, 3)))
+    entries = small_rotation_entries(jnp.asarray([1e-3, -2e-3, 5e-4]))
+    np.testing.assert_allclose(
+        np.stack(rotate_rows(entries, rows)),
+        np.array(entries, dtype=float) @ np.stack(rows),
+        rtol=1e-14,
+        atol=1e-15,
+    )
 
 
 def test_pinhole_projection():
