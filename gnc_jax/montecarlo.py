@@ -120,24 +120,25 @@ def estimate_cost(scenario: Scenario, runs: int | None = None, n_devices: int | 
     return CostEstimate(runs, float(steps), n_dev, per_device * steps * system.step_seconds)
 
 
-LANES = 8
-"""A device's batch of at least ``LANES_FROM`` runs is padded to a multiple of ``LANES``."""
 LANES_FROM = 64
+"""A device batch smaller than this many runs is never padded (see :func:`padded_chunk`)."""
 
 
-def padded_chunk(chunk: int, n_dev: int) -> int:
+def padded_chunk(chunk: int, n_dev: int, lanes: int = 1) -> int:
     """Runs per compiled call for ``chunk`` requested on ``n_dev`` devices: a whole number of
-    runs per device and, from ``LANES_FROM`` runs per device on, a multiple of ``LANES``.
+    runs per device and, for a system whose ``vector_lanes`` is above 1 and from
+    ``LANES_FROM`` runs per device on, a multiple of ``lanes`` per device.
 
-    XLA on CPU vectorises a batch's elementwise loops over whole SIMD registers: a device
-    batch that is not a multiple of the vector width (4 float64 with AVX2) ran 1.6x slower
-    per run (``deep-impact-los``, 2 devices: 1668 runs per device 261 us per run, 1669 runs
-    415 us). The extra runs are computed with their own keys and dropped; no run's outcome
-    depends on the padding.
+    XLA on CPU vectorises a batch's elementwise loops over whole SIMD registers: a
+    ``deep-impact-los`` device batch that was not a multiple of the vector width (4 float64
+    with AVX2) ran 1.6x slower per run (2 devices: 1668 runs per device 261 us per run, 1669
+    runs 415 us). The extra runs are computed with their own keys and dropped; no run's outcome
+    depends on the padding. A loop dominated by lock-step waiting (the capsule's corrector)
+    gains nothing and pays for the extra runs, hence the per-system choice.
     """
     per_device = -(-chunk // n_dev)
-    if per_device >= LANES_FROM:
-        per_device = -(-per_device // LANES) * LANES
+    if lanes > 1 and per_device >= LANES_FROM:
+        per_device = -(-per_device // lanes) * lanes
     return per_device * n_dev
 
 
@@ -362,7 +363,7 @@ def run_study(
     if chunk_size is None:  # equal chunks: the last one is not mostly padding
         chunk = -(-runs // -(-runs // chunk))
     if not distributed:
-        chunk = padded_chunk(chunk, n_dev)
+        chunk = padded_chunk(chunk, n_dev, system.vector_lanes)
     n_chunks = -(-runs // chunk)
     bounds = [(c * chunk, min((c + 1) * chunk, runs)) for c in range(n_chunks)]
 
@@ -526,7 +527,7 @@ def run_chunk(scenario: Scenario, seed: int, start: int, stop: int, chunk: int):
         _BUILT[text] = build(scenario)
     sim, law = _BUILT[text]
     fn, n_dev = batch_function(system)
-    padded = padded_chunk(chunk, n_dev)
+    padded = padded_chunk(chunk, n_dev, system.vector_lanes)
     seed_arr = jnp.asarray(seed, dtype=jnp.uint32)
     compiled, compile_s = _compile(system, fn, n_dev, sim, law, seed_arr, padded)
     out = compiled(sim, law, seed_arr, jnp.arange(start, start + padded))

@@ -351,15 +351,17 @@ def test_a_long_study_announces_its_estimate_and_runs_in_chunks_with_progress(ca
     assert study.summary()["failed"] == 0
 
 
-def test_device_batches_are_padded_to_whole_vectors_without_changing_a_run():
-    from gnc_jax.montecarlo import LANES, LANES_FROM, padded_chunk
+def test_device_batches_are_padded_to_whole_vectors_without_changing_a_run(monkeypatch):
+    from gnc_jax.montecarlo import LANES_FROM, padded_chunk
 
-    assert padded_chunk(1, 2) == 2 and padded_chunk(7, 2) == 8  # small: whole runs per device
-    assert padded_chunk(2 * LANES_FROM - 2, 2) == 2 * LANES_FROM - 2  # 63 per device: as is
-    assert padded_chunk(3334, 2) == 3344 and padded_chunk(4096, 2) == 4096
-    assert padded_chunk(1001, 1) == 1008 and padded_chunk(1001, 1) % LANES == 0
+    assert padded_chunk(1, 2, 8) == 2 and padded_chunk(7, 2, 8) == 8  # small: whole runs
+    assert padded_chunk(2 * LANES_FROM - 2, 2, 8) == 2 * LANES_FROM - 2  # 63 per device
+    assert padded_chunk(3334, 2, 8) == 3344 and padded_chunk(4096, 2, 8) == 4096
+    assert padded_chunk(1001, 1, 8) == 1008 and padded_chunk(1001, 1) == 1001
+    assert padded_chunk(3334, 2) == 3334  # a system without lanes: whole runs per device only
     # A padded study (130 runs: 65 per device -> 72) equals a loop of small, unpadded chunks.
     scenario = gj.load_scenario(TOY)
+    monkeypatch.setattr(type(gj.get_system(scenario.kind)), "vector_lanes", 8)
     padded = gj.run_study(scenario, runs=130, seed=5, progress=False)
     assert padded.chunk_size == 144
     small = gj.run_study(scenario, runs=130, seed=5, chunk_size=10, progress=False)

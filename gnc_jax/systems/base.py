@@ -61,6 +61,10 @@ class AbstractSystem(abc.ABC):
             cache, or whose lock-step loops wait longer for the slowest run, is slower per
             run; too small a batch pays the per-operation overhead); ``None``: 1024 runs per
             call.
+        vector_lanes: a device batch of 64 runs or more is padded to a multiple of this
+            (``montecarlo.padded_chunk``), measured per system: 8 where the loop is
+            elementwise work that XLA vectorises (a batch off the SIMD width ran 1.6x slower
+            per run), 1 (no padding) where lock-step waiting dominates.
         envelope_metrics: ``{summary key: label}`` mapped by ``gnc-jax envelope`` (one heat map
             each; ``failed_fraction`` is the fraction of failed runs).
         batch_tolerance: ``(rtol, atol)`` to which a vmapped batch reproduces the per-run
@@ -82,6 +86,7 @@ class AbstractSystem(abc.ABC):
     test_overrides: ClassVar[dict[str, Any]] = {}
     step_seconds: ClassVar[float] = 1e-6
     chunk_per_device: ClassVar[int | None] = None
+    vector_lanes: ClassVar[int] = 1
     envelope_metrics: ClassVar[dict[str, str]] = {"failed_fraction": "failed fraction"}
 
     # ---- cost ----
