@@ -142,7 +142,9 @@ def envelope(
     seed = scenario.seed if seed is None else seed
     system = scenario.system
     cells = list(_cell_scenarios(scenario, axes))  # every cell validated before any study
-    checks = system.envelope_check([c.config for _, c in cells], **check_options)
+    checks = system.envelope_check(
+        [c.config for _, c in cells], runs=runs, seed=seed, **check_options
+    )
     metrics = dict(system.envelope_metrics)
     rows = []
     t_all = time.perf_counter()

@@ -17,6 +17,12 @@ until it reaches the chute altitude (or the horizon ``simulation.max_time_s`` ru
   guidance's business; outside it is physics.
 
 Both are for the nominal vehicle and atmosphere (no dispersion), in the scenario's units.
+
+* **Per-run footprint** (:func:`track_footprints`): the same constant-bank flights and the same
+  landing-edge bisection, flown by each Monte Carlo run's own dispersed vehicle, atmosphere
+  and entry state, with the chute range measured along the nominal entry -> target track
+  (the axis the target's ``range_km`` and the runs' downrange errors are measured on): what
+  the dispersed population can physically reach, run by run.
 """
 
 import math
@@ -27,8 +33,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._types import Array, Scalar
-from ..dynamics.entry import EntryConditions, entry_state_from_conditions
-from ..geometry.sphere import central_angle, to_earth_fixed, unit
+from ..dynamics.entry import EntryConditions, EntryState, entry_state_from_conditions
+from ..geometry.sphere import along_cross_track, central_angle, destination, to_earth_fixed, unit
 from ..integrate import rk4_step
 from .entry_common import EntryModel, flight_variables
 
@@ -39,20 +45,22 @@ FOOTPRINT_BANKS_DEG = np.arange(0.0, 180.0 + 1e-9, 5.0)  # the constant banks of
 class OpenLoopFlight(NamedTuple):
     """Outcome of a constant-bank flight: ``landed`` at the chute altitude within the
     horizon, its ``range_m`` (great circle on the rotating Earth from the entry point to the
-    chute point) and the ``peak_load_g`` (sensed load) flown until then."""
+    chute point), the ``peak_load_g`` (sensed load) flown until then and the chute point
+    ``chute_unit`` (Earth-fixed unit vector; the entry point's when it did not land)."""
 
     landed: Array
     range_m: Scalar
     peak_load_g: Scalar
+    chute_unit: Array
 
 
-def fly_constant_bank(
-    model: EntryModel, entry: EntryConditions, bank_rad: Scalar, chute_m: Scalar, steps: int
+def fly_from_state(
+    model: EntryModel, y0: EntryState, bank_rad: Scalar, chute_m: Scalar, steps: int
 ) -> OpenLoopFlight:
-    """One open-loop flight of ``steps`` RK4 steps of ``DT_S`` at constant bank (rad), from
-    the entry interface to the chute altitude ``chute_m`` (the state freezes there)."""
+    """One open-loop flight of ``steps`` RK4 steps of ``DT_S`` (s) at constant bank (rad) from
+    the ECI state ``y0`` at t = 0 (m, m/s) to the chute altitude ``chute_m`` (m; the state
+    freezes there)."""
     earth = model.earth
-    y0 = entry_state_from_conditions(entry, earth)
     cos_b = jnp.cos(bank_rad)
     field = lambda t, y, a: model.vertical_plane_field(t, y, a)  # noqa: E731
 
@@ -72,7 +80,16 @@ def fly_constant_bank(
     (_, _, done, peak, chute_r, t_chute), _ = jax.lax.scan(body, init, None, length=steps)
     u0 = unit(to_earth_fixed(y0.r, 0.0, earth.rotation_rate))
     u1 = unit(to_earth_fixed(chute_r, t_chute, earth.rotation_rate))
-    return OpenLoopFlight(done, earth.equatorial_radius_m * central_angle(u0, u1), peak)
+    return OpenLoopFlight(done, earth.equatorial_radius_m * central_angle(u0, u1), peak, u1)
+
+
+def fly_constant_bank(
+    model: EntryModel, entry: EntryConditions, bank_rad: Scalar, chute_m: Scalar, steps: int
+) -> OpenLoopFlight:
+    """One open-loop flight of ``steps`` RK4 steps of ``DT_S`` at constant bank (rad), from
+    the entry interface to the chute altitude ``chute_m`` (the state freezes there)."""
+    y0 = entry_state_from_conditions(entry, model.earth)
+    return fly_from_state(model, y0, bank_rad, chute_m, steps)
 
 
 def _with_fpa(entry: EntryConditions, fpa_rad) -> EntryConditions:
@@ -91,24 +108,72 @@ def _flights(model, entry, fpas_rad, banks_rad, chute_m, steps):
 _flights_jit = jax.jit(_flights, static_argnames=("steps",))
 
 
+def _bisect_edge(model, y0, out_rad, in_rad, chute_m, steps) -> OpenLoopFlight:
+    """Bisection (30 halvings) of the bank between ``out_rad`` (does not land) and ``in_rad``
+    (lands) from the state ``y0``; the flight at the landing side of the edge."""
+
+    def halve(_, ends):
+        o, i = ends
+        mid = 0.5 * (o + i)
+        lands = fly_from_state(model, y0, mid, chute_m, steps).landed
+        return jnp.where(lands, o, mid), jnp.where(lands, mid, i)
+
+    _, inside = jax.lax.fori_loop(0, 30, halve, (out_rad, in_rad))
+    return fly_from_state(model, y0, inside, chute_m, steps)
+
+
 @jax.jit(static_argnames=("steps",))
 def _landing_edge(model, entry, fpas_rad, out_rad, in_rad, chute_m, steps):
-    """Bisection (30 halvings) of the bank between ``out_rad`` (does not land) and ``in_rad``
-    (lands) for each entry angle; the flight at the landing side of the edge."""
+    """:func:`_bisect_edge` for each entry angle."""
 
     def one(fpa, out, inside):
-        e = _with_fpa(entry, fpa)
-
-        def halve(_, ends):
-            o, i = ends
-            mid = 0.5 * (o + i)
-            lands = fly_constant_bank(model, e, mid, chute_m, steps).landed
-            return jnp.where(lands, o, mid), jnp.where(lands, mid, i)
-
-        _, inside = jax.lax.fori_loop(0, 30, halve, (out, inside))
-        return fly_constant_bank(model, e, inside, chute_m, steps)
+        y0 = entry_state_from_conditions(_with_fpa(entry, fpa), model.earth)
+        return _bisect_edge(model, y0, out, inside, chute_m, steps)
 
     return jax.vmap(one)(fpas_rad, out_rad, in_rad)
+
+
+def track_range_m(chute_unit: Array, start_unit: Array, azimuth: Scalar, earth) -> Scalar:
+    """Range (m) of a point along a track: the great circle leaving ``start_unit`` (Earth-fixed
+    unit vector) at ``azimuth`` (rad clockwise from north), measured from the start to the
+    point's foot on the track (its crossrange dropped), in (-pi/2, 3pi/2) x R_e. On the nominal
+    entry -> target track this is the axis of the target's ``entry.range_km``: a chute point at
+    the target's range has zero downrange error."""
+    quarter = destination(start_unit, azimuth, jnp.pi / 2)
+    along = along_cross_track(chute_unit, start_unit, quarter)[0]
+    return earth.equatorial_radius_m * (along + jnp.pi / 2)
+
+
+def track_footprint(
+    model: EntryModel, y0: EntryState, start_unit, azimuth, chute_m, steps: int
+) -> Array:
+    """[shortest, longest] chute range (m) along the track from ``start_unit`` at ``azimuth``
+    (:func:`track_range_m`) of the constant-bank flights (``FOOTPRINT_BANKS_DEG``) of
+    ``model`` from ``y0`` that land, the longest including the landing-edge bisection of
+    :meth:`EntryEnvelope.footprints` (between the highest-lift bank that does not land and the
+    next, when a lower bank does not land); NaN, NaN when no bank lands (a skip-out even with
+    full lift down)."""
+    banks = jnp.radians(jnp.asarray(FOOTPRINT_BANKS_DEG))
+    f = jax.vmap(lambda b: fly_from_state(model, y0, b, chute_m, steps))(banks)
+    rng = jax.vmap(lambda u: track_range_m(u, start_unit, azimuth, model.earth))(f.chute_unit)
+    k = jnp.argmax(f.landed)  # the lowest landing bank (lift-up side)
+    any_lands = f.landed.any()
+    edge = any_lands & (k > 0)
+    e = _bisect_edge(model, y0, banks[jnp.maximum(k - 1, 0)], banks[k], chute_m, steps)
+    e_rng = track_range_m(e.chute_unit, start_unit, azimuth, model.earth)
+    lo = jnp.min(jnp.where(f.landed, rng, jnp.inf))
+    hi = jnp.max(jnp.where(f.landed, rng, -jnp.inf))
+    hi = jnp.where(edge & e.landed, jnp.maximum(hi, e_rng), hi)
+    return jnp.where(any_lands, jnp.stack([lo, hi]), jnp.nan)
+
+
+@jax.jit(static_argnames=("steps",))
+def track_footprints(models: EntryModel, y0s: EntryState, start_unit, azimuth, chute_m, steps):
+    """:func:`track_footprint` of a batch of models and states (leading axis of every leaf),
+    shape (n, 2), m."""
+    return jax.vmap(lambda m, y: track_footprint(m, y, start_unit, azimuth, chute_m, steps))(
+        models, y0s
+    )
 
 
 class Corridor(NamedTuple):
@@ -220,4 +285,13 @@ class EntryEnvelope:
         return float(lo), float(hi)
 
 
-__all__ = ["OpenLoopFlight", "fly_constant_bank", "Corridor", "EntryEnvelope"]
+__all__ = [
+    "OpenLoopFlight",
+    "fly_constant_bank",
+    "fly_from_state",
+    "track_range_m",
+    "track_footprint",
+    "track_footprints",
+    "Corridor",
+    "EntryEnvelope",
+]

@@ -598,7 +598,11 @@ def build(scenario) -> CapsuleSimulation:
     """Simulation data of a validated capsule scenario (SI units); the law (with the reference
     it designs for this vehicle, entry and target) is built by the system from
     ``[guidance.<law>]``."""
-    cfg = scenario.config
+    return build_from_config(scenario.config)
+
+
+def build_from_config(cfg: dict) -> CapsuleSimulation:
+    """:func:`build` from a validated configuration (no guidance law, no reference design)."""
     e, act, g, s = cfg["entry"], cfg["actuator"], cfg["guidance"], cfg["simulation"]
     earth, vehicle, atmosphere, entry = _nominal(cfg)
     target = _target(cfg, earth, entry)
