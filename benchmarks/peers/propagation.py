@@ -16,7 +16,8 @@ position compared with a tight reference, throughput in arcs/s (compile time apa
   show its extra cost). Propagators: gnc_jax's vmapped fixed-step ``lax.scan``
   (`integrate_fixed`, RK4 and Butcher's RK6) sharded over the host devices as `montecarlo`
   does; the same scan on a component-wise transcription of the field (structure of arrays
-  under vmap; not the package's field: it measures what the (batch, 3) layout costs);
+  under vmap: the layout of the package's closed loops and skip-entry predictor,
+  `dynamics.entry.EntryStateXYZ`; the plain rows measure what a (batch, 3) layout costs);
   heyoka.py's Taylor integrator in batch (SIMD) mode, one batch integrator per thread looping
   over the batches (the documented ``ensemble_propagate_until_batch`` deep-copies the
   integrator for every batch and is 10x slower here: one row shows it); a hand-written numba
