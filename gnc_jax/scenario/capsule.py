@@ -90,7 +90,15 @@ SCHEMA = {
         ),
     },
     "guidance": {
-        "hold_bank_deg": F("float", 60.0, lo=0.0, hi=180.0, units="deg"),
+        "hold_bank_deg": F(
+            "float",
+            60.0,
+            lo=0.0,
+            hi=180.0,
+            units="deg",
+            doc="bank held from the entry interface until the sensed load reaches the law's "
+            "ng0 (skip_entry: ng0_g), when guidance starts",
+        ),
         "pc_period_s": F(
             "float",
             4.0,
