@@ -10,7 +10,9 @@ Phases (seed 003 §2, Fig. 1):
    second-entry range by the first-order expansion of eq. 10 around the stored reference. The
    corrector (eqs. 11-15) solves for sigma_0 with the bounded regula falsi of
    :mod:`gnc_jax.root_finding`, a fixed-iteration ``lax`` loop;
-2. *Kepler*: after the pull-up, while N_g < 0.2 g (no guidance: the command is held);
+2. *Kepler*: after the pull-up, while N_g < 0.2 g (no guidance: the command is held); a
+   skip without a Kepler phase goes from 1 to 3 at its apogee, if the reference's switch is
+   such an apogee too only within ``apogee_switch_margin_mps`` of its speed;
 3. *second entry*: reference-trajectory tracking, cos sigma_c = [(L/D)_0 cos sigma_0 + K.Delta]
    / (L/D) (eq. 6 without its repeated K.Delta, a typo) with the feedback of eq. 7 on the drag
    load N_gx, Ḣ, the range to go S and its rate; the reference bank profile is corrected once
@@ -163,6 +165,14 @@ class ReferenceTrajectory(eqx.Module):
     def bank_at(self, speed):
         """The reference bank (rad) at ``speed``: ``lookup(speed)[0]``."""
         return self._interpolator(speed)(self.bank_rad)
+
+    def switch_at_apogee(self, kepler_load_g) -> Array:
+        """Whether the reference's second entry starts at the skip's apogee: its load never
+        fell below ``kepler_load_g`` after the pull-up (no Kepler phase), so the switch is the
+        first descending point, where the drag load is above the threshold (by more than 10 %;
+        at the end of a Kepler arc it is the threshold within a design step, 0.19-0.20 g at
+        0.2 g, against 0.25-0.68 g at an apogee switch)."""
+        return self.drag_load_g[0] > 1.1 * kepler_load_g
 
     def second_entry_range(self, fv: FlightVariables) -> Scalar:
         """Seed 003 eq. 10: S2 = S_std2 + dF/dv dv + dF/dtheta dtheta + dF/dH dH, m."""
@@ -475,6 +485,20 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         "two roots it can settle on the lofting one; at a -5.6 deg entry 18 of 256 runs skip "
         "out against 5 with 'bracket')",
     )
+    apogee_switch_margin_mps: Scalar = param(
+        250.0,
+        lo=0.0,
+        hi=1e5,
+        units="m/s",
+        doc="a skip without a Kepler phase (the reference's switch point is its apogee: short "
+        "ranges) switches to tracking at its apogee only if the speed there is at most this "
+        "much above the reference's switch speed; a faster crest (a ripple deep in the "
+        "atmosphere, 2-3 g, after a 1-3 km rise, where a run flying much lift down never "
+        "skips) is flown through on the first-entry profile, in the law and its predictor, "
+        "until the speed has fallen to that. At -5.6 deg / 4000 km the runs' apogees are "
+        "within 140 m/s of the reference's; the 9 failed runs of 200 switched 250-1470 m/s "
+        "above it, at 60-66 km, after corrector cycles that could not bracket. 1e5 disables it",
+    )
     n_bracket: int = param(6, lo=1, hi=100, doc="bracketing steps of the corrector")
     n_iter: int = param(6, lo=1, hi=100, doc="regula-falsi iterations of the corrector")
 
@@ -616,6 +640,13 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         """The prediction has not ended and has steps left."""
         return (c.kind < 0) & (c.k < self.predictor_max_steps)
 
+    def _apogee_gate(self, speed):
+        """Whether a descent without a Kepler phase at ``speed`` may start the second entry
+        (see ``apogee_switch_margin_mps``): always, unless the reference's own switch point
+        is an apogee and ``speed`` is more than the margin above its speed."""
+        slow = speed <= self.reference.switch_velocity_mps + self.apogee_switch_margin_mps
+        return slow | ~self.reference.switch_at_apogee(self.kepler_load_g)
+
     def _bank(self, second, sigma_0, v_0, speed):
         """Bank magnitude the prediction flies: the first-entry profile, or the reference
         after a skip without a Kepler phase (``second``)."""
@@ -651,7 +682,7 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         kepler = c.kepler | (pulled & (ng1 < self.kepler_load_g))
         descending = pulled & (hdot1 < 0.0) & (ng1 >= self.kepler_load_g)
         switch = kepler & descending
-        second = c.second | (~kepler & descending)
+        second = c.second | (~kepler & descending & self._apogee_gate(speed1))
         chute = alt1 < self.chute_altitude_m
         skip = alt1 > self.skip_out_altitude_m
         kind = jnp.where(switch, 0, jnp.where(chute, 1, jnp.where(skip, 2, -1))).astype(jnp.int32)
@@ -1007,7 +1038,7 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         phase = jnp.where(to_kepler, 2, phase)
         to_track = (
             live
-            & ((phase == 1) | (phase == 2))
+            & ((phase == 2) | ((phase == 1) & self._apogee_gate(fv.speed_mps)))
             & pulled
             & (fv.hdot_mps < 0.0)
             & (ng >= self.kepler_load_g)

@@ -318,3 +318,36 @@ def test_switch_point_is_smooth_in_the_bank(law_and_ctx):
     fit = np.polyval(np.polyfit(np.asarray(d), np.asarray(f), 3), np.asarray(d))
     assert float(np.ptp(np.asarray(f))) > 100e3  # steep
     assert float(np.max(np.abs(np.asarray(f) - fit))) < 1.5e3
+
+
+def test_a_fast_crest_is_not_an_apogee_switch(law_and_ctx):
+    """A reference without a Kepler phase (its switch point is the skip's apogee, drag load
+    above the threshold there) starts tracking at a pulled-up descent only within
+    ``apogee_switch_margin_mps`` of its switch speed; a crest 500 m/s faster (a ripple deep in
+    the atmosphere) stays in the first entry, in the law and in its predictor. A reference
+    ending a Kepler arc (the packaged one) is not gated."""
+    import equinox as eqx
+
+    _, law, ctx = law_and_ctx
+    ref = law.reference
+    assert not bool(ref.switch_at_apogee(law.kepler_load_g))
+    apogee = eqx.tree_at(lambda g: g.reference.drag_load_g, law, ref.drag_load_g.at[0].set(0.6))
+    assert bool(apogee.reference.switch_at_apogee(apogee.kepler_load_g))
+    m = ctx.model
+    y = state_at(61.6e3, ctx)
+    nav = EntryNav(y, *drag_and_lift(y, m.vehicle, m.earth, m.atmosphere))
+    live = jnp.asarray(True)
+    v_sw = float(ref.switch_velocity_mps)
+    margin = float(law.apogee_switch_margin_mps)
+    for g, dv, want in [
+        (apogee, margin + 500.0, 1),
+        (apogee, margin - 100.0, 3),
+        (law, margin + 500.0, 3),
+    ]:
+        state = g.init(nav, ctx)._replace(
+            phase=jnp.asarray(1), pulled_up=jnp.asarray(True), dip_altitude_m=jnp.asarray(60e3)
+        )
+        fv = FlightVariables(jnp.asarray(v_sw + dv), jnp.asarray(0.0), 62e3, jnp.asarray(-5.0))
+        phase, *_ = g._phase_events(state, fv, jnp.asarray(1.5), live)
+        assert int(phase) == want
+        assert bool(g._apogee_gate(jnp.asarray(v_sw + dv))) == (want == 3)
