@@ -431,6 +431,28 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         units="km",
         doc="first-entry reversal threshold on the crossrange predicted at the switch point",
     )
+    switch_crossrange_final_m: Scalar = param(
+        10.0,
+        toml="switch_crossrange_final_km",
+        scale=1e3,
+        lo=0.0,
+        hi=1e3,
+        units="km",
+        doc="the first-entry reversal threshold at the Kepler load: after the pull-up it "
+        "narrows linearly with the load from switch_crossrange_km at switch_narrow_load_g to "
+        "this. The vertical-plane prediction leaves out the lateral lift still to come, so "
+        "a run whose predicted crossrange creeps up to the threshold as the load falls "
+        "enters the Kepler arc beyond it (50 km at a 40 km threshold), which a low-L/D "
+        "capsule tracking near lift-up cannot remove",
+    )
+    switch_narrow_load_g: Scalar = param(
+        1.0,
+        lo=0.0,
+        lo_open=True,
+        hi=10.0,
+        units="g",
+        doc="load below which (after the pull-up) the first-entry reversal threshold narrows",
+    )
     track_bank_min_rad: Scalar = param(
         15.0,
         toml="track_bank_min_deg",
@@ -978,7 +1000,7 @@ class SkipEntryGuidance(AbstractEntryGuidance):
             ),
         )
         chi_now = earth.equatorial_radius_m * crossrange_to_target(y.r, v_rel, target)
-        sign, reverse = self._bank_sign(state, phase, fv, chi_switch, chi_now, live)
+        sign, reverse = self._bank_sign(state, phase, fv, chi_switch, chi_now, live, pulled, ng)
 
         log = self._log(state, y, t, ctx, fv, phase, events, res, did_pc, reverse, live)
         new = SkipEntryState(
@@ -1096,15 +1118,35 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         res = jax.lax.cond(is_pc_step, pc, no_pc, None)
         return res, active
 
-    def _bank_sign(self, state: SkipEntryState, phase, fv, chi_switch, chi_now, live):
+    def switch_threshold_m(self, pulled, ng):
+        """First-entry reversal threshold on the predicted switch-point crossrange, m:
+        ``switch_crossrange_m``, narrowing after the pull-up linearly with the load from
+        ``switch_narrow_load_g`` down to ``switch_crossrange_final_m`` at the Kepler load,
+        where the first entry's last reversal is made."""
+        w = jnp.clip(
+            (ng - self.kepler_load_g)
+            / jnp.maximum(self.switch_narrow_load_g - self.kepler_load_g, 1e-6),
+            0.0,
+            1.0,
+        )
+        narrowed = self.switch_crossrange_final_m + w * (
+            self.switch_crossrange_m - self.switch_crossrange_final_m
+        )
+        return jnp.where(
+            pulled, jnp.minimum(narrowed, self.switch_crossrange_m), self.switch_crossrange_m
+        )
+
+    def _bank_sign(self, state: SkipEntryState, phase, fv, chi_switch, chi_now, live, pulled, ng):
         """Sign of the bank and whether it reverses this step.
 
         The bank reverses when the crossrange leaves the funnel (phases 1 and 3); the first
         entry judges the crossrange predicted at the switch point, which includes the drift of
-        the rotating Earth under the Kepler arc."""
+        the rotating Earth under the Kepler arc, against :meth:`switch_threshold_m`."""
         chi = jnp.where(phase == 1, chi_switch, chi_now)
         want = -jnp.sign(chi)  # negative bank turns left, towards a target on the left
-        threshold = jnp.where(phase == 1, self.switch_crossrange_m, self.funnel_m(fv.speed_mps))
+        threshold = jnp.where(
+            phase == 1, self.switch_threshold_m(pulled, ng), self.funnel_m(fv.speed_mps)
+        )
         outside = (jnp.abs(chi) > threshold) & ((phase == 1) | (phase == 3))
         reverse = live & outside & (want != state.sign)
         return jnp.where(reverse, want, state.sign), reverse

@@ -351,3 +351,42 @@ def test_a_fast_crest_is_not_an_apogee_switch(law_and_ctx):
         phase, *_ = g._phase_events(state, fv, jnp.asarray(1.5), live)
         assert int(phase) == want
         assert bool(g._apogee_gate(jnp.asarray(v_sw + dv))) == (want == 3)
+
+
+def test_first_entry_reversal_threshold_narrows_towards_the_kepler_load(law_and_ctx):
+    """The first entry reverses on the crossrange predicted at the switch point beyond
+    ``switch_crossrange_m``; after the pull-up the threshold narrows linearly with the load,
+    from that at ``switch_narrow_load_g`` to ``switch_crossrange_final_m`` at the Kepler load
+    (hand-computed values), so a run does not coast into the Kepler arc with a predicted
+    crossrange just under the wide threshold."""
+    _, law, ctx = law_and_ctx
+    wide, final = float(law.switch_crossrange_m), float(law.switch_crossrange_final_m)
+    lo, hi = float(law.kepler_load_g), float(law.switch_narrow_load_g)
+    f = law.switch_threshold_m
+    t, fa = jnp.asarray(True), jnp.asarray(False)
+    assert float(f(fa, jnp.asarray(lo))) == wide  # before the pull-up: the wide threshold
+    assert float(f(t, jnp.asarray(3.0))) == wide
+    assert float(f(t, jnp.asarray(lo))) == pytest.approx(final)
+    assert float(f(t, jnp.asarray(0.05))) == pytest.approx(final)
+    mid = 0.5 * (lo + hi)
+    assert float(f(t, jnp.asarray(mid))) == pytest.approx(0.5 * (wide + final))
+    # the reversal itself: a predicted crossrange 0.6 of the way from the final to the wide one
+    m = ctx.model
+    y = state_at(70e3, ctx)
+    nav = EntryNav(y, *drag_and_lift(y, m.vehicle, m.earth, m.atmosphere))
+    state = law.init(nav, ctx)._replace(phase=jnp.asarray(1), sign=jnp.asarray(1.0))
+    fv = FlightVariables(jnp.asarray(7.5e3), jnp.asarray(0.0), 70e3, jnp.asarray(50.0))
+    chi = final + 0.6 * (wide - final)  # target on the left while the bank turns right
+    live = jnp.asarray(True)
+    for pulled, ng, reverses in [(t, lo + 0.1 * (hi - lo), True), (t, hi, False), (fa, lo, False)]:
+        sign, reverse = law._bank_sign(
+            state,
+            jnp.asarray(1),
+            fv,
+            jnp.asarray(chi),
+            jnp.asarray(0.0),
+            live,
+            pulled,
+            jnp.asarray(ng),
+        )
+        assert bool(reverse) == reverses and float(sign) == (-1.0 if reverses else 1.0)
