@@ -119,7 +119,11 @@ Objective = Callable[[Scalar, Bool[Array, ""]], tuple[Scalar, Any, Any]]
 
 
 def _keep_best(best: _Best, x: Scalar, f: Scalar, aux) -> _Best:
-    better = jnp.abs(f) < jnp.abs(best.f)
+    """The evaluated point of smallest |f|; of equal ones the later. On a plateau of f (a
+    skip-out predicted for every candidate: the same overshoot) the later candidate is the
+    one farthest along the bracketing direction, towards the bound a monotone f would
+    saturate at, where the first one would leave the command where it was."""
+    better = jnp.abs(f) <= jnp.abs(best.f)
     return _Best(
         jnp.where(better, x, best.x),
         jnp.where(better, f, best.f),

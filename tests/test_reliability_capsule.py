@@ -144,6 +144,24 @@ def test_a_design_that_misses_the_target_is_refused(paper):
     assert _one_line(e).startswith("entry.range_km: 8000 km; the reference design did not")
 
 
+def test_the_fine_first_guess_at_the_overshoot_boundary_brackets_a_falling_root():
+    # -5.3 deg: the banks that skip and land span 118.1..120.6 deg (less than the design's
+    # 2 deg step) and the chute range is not monotone there; the fallback's guess lies on the
+    # falling branch next to the root (118.25 deg at 6000 km with the initial profile)
+    sc = gj.load_scenario(
+        "lunar-skip-entry", overrides=["entry.fpa_deg=-5.3", "entry.range_km=6000"]
+    )
+    problem = _problem(sc)
+    guess = rd.fine_first_entry_guess(problem)
+    assert guess is not None and 118.0 < math.degrees(guess) < 118.5
+    a = rd.PROFILE_INIT_RAD[0]
+    ends = [guess - rd.SIGMA_1_FINE_STEP_RAD, guess, guess + rd.SIGMA_1_FINE_STEP_RAD]
+    flights = [rd.fly_nominal(problem, s, a, a, rd.V_SWITCH_INIT_MPS) for s in ends]
+    assert all(int(rd._fate(f)) == rd.SKIP_LANDS for f in flights[1:])
+    err = [float(rd.range_error_m(problem, f)) for f in flights]
+    assert err[1] > 0.0 > err[2] or err[0] > 0.0 > err[1]
+
+
 def _miss_km(o):
     return np.maximum(np.abs(o["downrange_err_km"]), np.abs(o["crossrange_err_km"]))
 

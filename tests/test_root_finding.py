@@ -18,7 +18,7 @@ def _sequential_reference(
     evaluated = [(x0, f0)]
 
     def best():
-        return min(evaluated, key=lambda p: abs(p[1]))[0]
+        return min(reversed(evaluated), key=lambda p: abs(p[1]))[0]  # ties: the later
 
     if abs(f0) < tol:
         return x0, 1, RootStatus.ok
@@ -174,6 +174,14 @@ def test_too_few_bracketing_steps_is_not_bracketed():
     assert int(result.status) == RootStatus.not_bracketed
     assert int(result.n_evals_early_exit) == 4
     assert float(result.x) == pytest.approx(0.35)  # the last, best point tried
+
+
+def test_a_plateau_not_bracketed_moves_to_the_last_point_tried():
+    # a skip-out predicted for every bank tried (the same overshoot): the command moves
+    # n_bracket steps towards the bound rather than staying at the warm start
+    result = bounded_regula_falsi(lambda x: jnp.ones(()), 2.0, 0.1, 0.0, math.pi, 1e-3, 6, 6)
+    assert int(result.status) == RootStatus.not_bracketed
+    assert float(result.x) == pytest.approx(2.6)
 
 
 def test_too_few_iterations_is_no_convergence():

@@ -62,6 +62,12 @@ REFERENCE_VERSION = 5
 # constant-bank footprint of 824..10 083 km).
 SIGMA_1_BOUNDS_RAD = (math.radians(15.0), math.radians(165.0))
 SIGMA_1_STEP_RAD = math.radians(2.0)
+# The fallback of a design whose solve did not converge (see design_with_fallback): at the
+# overshoot boundary the first-entry banks that skip and land span about 2.5 deg (v1, -5.3
+# deg: 118.1..120.6 deg, a skip-out below, a direct entry or a second-entry skip-out above),
+# narrower than SIGMA_1_STEP_RAD, and the chute range is not monotone in them; the coarse
+# bracketing then straddles the jump to the direct entry and the solve stalls at its guess.
+SIGMA_1_FINE_STEP_RAD = math.radians(0.05)
 SIGMA_1_BRACKET_STEPS = 12
 SIGMA_1_GUESS_RAD = 1.2915  # 74 deg
 PROFILE_INIT_RAD = (1.0472, 1.0472)  # 60 deg
@@ -181,8 +187,12 @@ def range_error_m(problem: NominalProblem, flight: _Flight) -> Scalar:
     return jnp.where(flight.done, along * earth.equatorial_radius_m, 8.0e6)
 
 
-def solve_first_entry_bank(problem: NominalProblem, sigma_a, sigma_b, v_switch, guess):
-    """sigma_1 putting the nominal chute point on the target, with implicit gradients."""
+def solve_first_entry_bank(
+    problem: NominalProblem, sigma_a, sigma_b, v_switch, guess, step=SIGMA_1_STEP_RAD
+):
+    """sigma_1 putting the nominal chute point on the target, with implicit gradients.
+
+    ``step`` (rad, static) is the bracketing step of the solve (eq. 15)."""
 
     def residual(s1):
         return range_error_m(problem, fly_nominal(problem, s1, sigma_a, sigma_b, v_switch))
@@ -191,7 +201,7 @@ def solve_first_entry_bank(problem: NominalProblem, sigma_a, sigma_b, v_switch, 
         res = bounded_regula_falsi(
             f,
             x0,
-            SIGMA_1_STEP_RAD,
+            step,
             *SIGMA_1_BOUNDS_RAD,
             RANGE_TOLERANCE_M,
             n_bracket=SIGMA_1_BRACKET_STEPS,
@@ -381,6 +391,53 @@ def require_reachable(problem: NominalProblem, entry: dict, vehicle: dict, guess
     return lo, hi, float(banks[int(np.argmin(miss))])
 
 
+def fine_first_entry_guess(problem: NominalProblem, guess=SIGMA_1_GUESS_RAD):
+    """A first guess for a design whose solve at ``SIGMA_1_STEP_RAD`` failed: the first-entry
+    bank, on a ``SIGMA_1_FINE_STEP_RAD`` grid within one coarse step of the coarse candidates
+    (:func:`candidate_banks` from ``guess``) that skip and land with the initial profile, at
+    the end nearest the target of a fine interval over which both ends skip and land and the
+    chute range error falls through zero (the solve's ``decreasing`` assumption holds there).
+    None when there is no such interval."""
+    coarse = candidate_banks(guess)
+    profile = jnp.asarray([PROFILE_INIT_RAD[0]])
+    _, fate = (np.asarray(x)[:, 0] for x in _candidate_flights(problem, coarse, profile))
+    lands = coarse[fate == SKIP_LANDS]
+    if lands.size == 0:
+        return None
+    lo, hi = SIGMA_1_BOUNDS_RAD
+    n = int(round(SIGMA_1_STEP_RAD / SIGMA_1_FINE_STEP_RAD))
+    fine = np.unique(
+        np.clip(lands[:, None] + SIGMA_1_FINE_STEP_RAD * np.arange(-n, n + 1), lo, hi).ravel()
+    )
+    err, fate = (np.asarray(x)[:, 0] for x in _candidate_flights(problem, fine, profile))
+    ok = (fate[:-1] == SKIP_LANDS) & (fate[1:] == SKIP_LANDS)
+    falls = ok & (err[:-1] > 0.0) & (err[1:] <= 0.0) & (np.diff(fine) < 1.5 * SIGMA_1_FINE_STEP_RAD)
+    if not falls.any():
+        return None
+    i = np.flatnonzero(falls)
+    nearer = np.where(np.abs(err[i]) <= np.abs(err[i + 1]), i, i + 1)
+    return float(fine[nearer[np.argmin(np.abs(err[nearer]))]])
+
+
+def design_with_fallback(problem: NominalProblem, entry: dict, vehicle: dict, **kwargs):
+    """:func:`design`, refused by :func:`require_design` if it did not converge; then, once,
+    the design again with the fine bracketing step ``SIGMA_1_FINE_STEP_RAD`` from
+    :func:`fine_first_entry_guess` (the overshoot boundary, where the banks that skip and land
+    are a window narrower than the coarse step), refused in turn if that fails too. A design
+    that converges at the coarse step is returned as it is."""
+    d = design(problem, **kwargs)
+    try:
+        require_design(problem, d, entry, vehicle)
+        return d
+    except ScenarioError:
+        guess = fine_first_entry_guess(problem, kwargs.get("sigma_1_guess", SIGMA_1_GUESS_RAD))
+        if guess is None:
+            raise
+    d = design(problem, **dict(kwargs, sigma_1_guess=guess, sigma_1_step=SIGMA_1_FINE_STEP_RAD))
+    require_design(problem, d, entry, vehicle)
+    return d
+
+
 def require_design(problem: NominalProblem, d: "DesignResult", entry: dict, vehicle: dict):
     """Refuse (:class:`ScenarioError`, naming ``entry.range_km``) a finished design whose
     nominal does not skip and put the chute on the target: its solve did not converge."""
@@ -409,9 +466,11 @@ class DesignResult(NamedTuple):
     objective_history: list
 
 
-def _design_objective(problem: NominalProblem, theta, v_switch, guess, w_margin):
+def _design_objective(
+    problem: NominalProblem, theta, v_switch, guess, w_margin, step=SIGMA_1_STEP_RAD
+):
     """J = N_g2 + w_margin * smooth max of the bank cosines, with (sigma_1, switch speed)."""
-    s1 = solve_first_entry_bank(problem, theta[0], theta[1], v_switch, guess)
+    s1 = solve_first_entry_bank(problem, theta[0], theta[1], v_switch, guess, step)
     fl = fly_nominal(problem, s1, theta[0], theta[1], v_switch)
     cosines = jnp.abs(jnp.cos(jnp.stack([s1, theta[0], theta[1]])))
     margin = jnp.log(jnp.sum(jnp.exp(20.0 * cosines))) / 20.0
@@ -423,8 +482,10 @@ def _design_objective(problem: NominalProblem, theta, v_switch, guess, w_margin)
 
 # The design's compiled steps take the problem as an argument (not a closure), so that every
 # design after the first of a process reuses them: compilation was about 45 s of each design.
-_design_value_and_grad = jax.jit(jax.value_and_grad(_design_objective, argnums=1, has_aux=True))
-_solve_first_entry_bank = jax.jit(solve_first_entry_bank)
+_design_value_and_grad = jax.jit(
+    jax.value_and_grad(_design_objective, argnums=1, has_aux=True), static_argnames="step"
+)
+_solve_first_entry_bank = jax.jit(solve_first_entry_bank, static_argnames="step")
 _fly_nominal = jax.jit(fly_nominal)
 
 
@@ -436,10 +497,12 @@ def design(
     init=PROFILE_INIT_RAD,
     sigma_1_guess=SIGMA_1_GUESS_RAD,
     callback=None,
+    sigma_1_step=SIGMA_1_STEP_RAD,
 ):
     """Optimise (sigma_a, sigma_b); returns the design (radians) and the objective history.
 
-    ``callback(step, objective)``, if given, is called after each optimiser step (progress)."""
+    ``callback(step, objective)``, if given, is called after each optimiser step (progress);
+    ``sigma_1_step`` is the bracketing step of the first-entry bank solve."""
     v_switch = jnp.asarray(V_SWITCH_INIT_MPS)
     w = jnp.asarray(w_margin, dtype=jnp.float64)
     theta = jnp.asarray(init)
@@ -448,7 +511,9 @@ def design(
     history = []
     guess = jnp.asarray(sigma_1_guess)
     for _ in range(steps):
-        (value, (s1, vs)), g = _design_value_and_grad(problem, theta, v_switch, guess, w)
+        (value, (s1, vs)), g = _design_value_and_grad(
+            problem, theta, v_switch, guess, w, step=sigma_1_step
+        )
         history.append(float(value))
         if callback is not None:
             callback(len(history), history[-1])
@@ -456,7 +521,7 @@ def design(
         theta = jnp.clip(optax.apply_updates(theta, updates), *PROFILE_BOUNDS_RAD)
         # anchor the profile at the switch speed the design actually produces
         v_switch, guess = vs, s1
-    s1 = _solve_first_entry_bank(problem, theta[0], theta[1], v_switch, guess)
+    s1 = _solve_first_entry_bank(problem, theta[0], theta[1], v_switch, guess, step=sigma_1_step)
     return DesignResult(float(s1), float(theta[0]), float(theta[1]), float(v_switch), history)
 
 
@@ -748,8 +813,7 @@ def reference_for(problem: NominalProblem, description: dict, **design_kwargs):
                 bar.update()
 
             kwargs = dict(design_kwargs, sigma_1_guess=nearest if guess is None else guess)
-            d = design(problem, callback=stepped, **kwargs)
-            require_design(problem, d, entry, vehicle)
+            d = design_with_fallback(problem, entry, vehicle, callback=stepped, **kwargs)
             bar.set_postfix_str("tabulating the reference")
             ref = tabulate_reference(problem, d)
             bar.update()
