@@ -808,8 +808,15 @@ def reference_for(problem: NominalProblem, description: dict, **design_kwargs):
             _, _, nearest = require_reachable(problem, entry, vehicle, guess)
             bar.update()
 
+            retry = []
+
             def stepped(step, objective):
-                bar.set_postfix_str(f"step {step}/{steps}, objective {objective:.4g}")
+                if step == 1 and bar.n > 1:  # design_with_fallback's fine retry: more stages
+                    retry.append(True)
+                    bar.total += steps
+                    bar.refresh()
+                label = "fine-step retry, " if retry else ""
+                bar.set_postfix_str(f"{label}step {step}/{steps}, objective {objective:.4g}")
                 bar.update()
 
             kwargs = dict(design_kwargs, sigma_1_guess=nearest if guess is None else guess)
