@@ -192,7 +192,8 @@ def solve_first_entry_bank(
 ):
     """sigma_1 putting the nominal chute point on the target, with implicit gradients.
 
-    ``step`` (rad, static) is the bracketing step of the solve (eq. 15)."""
+    ``step`` (rad) is the bracketing step of the solve (eq. 15), an argument: the fine-step
+    retry of :func:`design_with_fallback` reuses the compiled design."""
 
     def residual(s1):
         return range_error_m(problem, fly_nominal(problem, s1, sigma_a, sigma_b, v_switch))
@@ -482,10 +483,8 @@ def _design_objective(
 
 # The design's compiled steps take the problem as an argument (not a closure), so that every
 # design after the first of a process reuses them: compilation was about 45 s of each design.
-_design_value_and_grad = jax.jit(
-    jax.value_and_grad(_design_objective, argnums=1, has_aux=True), static_argnames="step"
-)
-_solve_first_entry_bank = jax.jit(solve_first_entry_bank, static_argnames="step")
+_design_value_and_grad = jax.jit(jax.value_and_grad(_design_objective, argnums=1, has_aux=True))
+_solve_first_entry_bank = jax.jit(solve_first_entry_bank)
 _fly_nominal = jax.jit(fly_nominal)
 
 
@@ -512,7 +511,7 @@ def design(
     guess = jnp.asarray(sigma_1_guess)
     for _ in range(steps):
         (value, (s1, vs)), g = _design_value_and_grad(
-            problem, theta, v_switch, guess, w, step=sigma_1_step
+            problem, theta, v_switch, guess, w, jnp.asarray(sigma_1_step)
         )
         history.append(float(value))
         if callback is not None:
@@ -521,7 +520,9 @@ def design(
         theta = jnp.clip(optax.apply_updates(theta, updates), *PROFILE_BOUNDS_RAD)
         # anchor the profile at the switch speed the design actually produces
         v_switch, guess = vs, s1
-    s1 = _solve_first_entry_bank(problem, theta[0], theta[1], v_switch, guess, step=sigma_1_step)
+    s1 = _solve_first_entry_bank(
+        problem, theta[0], theta[1], v_switch, guess, jnp.asarray(sigma_1_step)
+    )
     return DesignResult(float(s1), float(theta[0]), float(theta[1]), float(v_switch), history)
 
 

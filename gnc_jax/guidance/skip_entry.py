@@ -11,8 +11,8 @@ Phases (seed 003 §2, Fig. 1):
    corrector (eqs. 11-15) solves for sigma_0 with the bounded regula falsi of
    :mod:`gnc_jax.root_finding`, a fixed-iteration ``lax`` loop;
 2. *Kepler*: after the pull-up, while N_g < 0.2 g (no guidance: the command is held); a
-   skip without a Kepler phase goes from 1 to 3 at its apogee, if the reference's switch is
-   such an apogee too only within ``apogee_switch_margin_mps`` of its speed;
+   skip without a Kepler phase goes from 1 to 3 at its apogee (when the reference's own
+   switch is an apogee, only within ``apogee_switch_margin_mps`` of the reference's speed);
 3. *second entry*: reference-trajectory tracking, cos sigma_c = [(L/D)_0 cos sigma_0 + K.Delta]
    / (L/D) (eq. 6 without its repeated K.Delta, a typo) with the feedback of eq. 7 on the drag
    load N_gx, Ḣ, the range to go S and its rate; the reference bank profile is corrected once
