@@ -474,25 +474,35 @@ class BankActuator(eqx.Module):
     """Roll of the bank angle with finite rate and acceleration (reaction-control limits).
 
     Defaults: 20 deg/s and 10 deg/s^2, typical of the Apollo/Orion reaction control system in
-    roll (a 180 deg reversal then takes about 11 s). A command is reached by the straight path
-    in sigma (a reversal from +60 deg to -60 deg rolls through lift-up), except with
-    ``shortest`` (the default) between two lift-down banks (both beyond 90 deg), which rolls
-    through lift-down, the shorter way round that keeps the vertical lift down (the angle flown
-    is kept in (-180, 180] deg); a roll under way keeps its way round when the command
-    changes. Measured: rolling a lift-down reversal through lift-up lofts
-    a capsule entering shallow (-5.6 deg) out of the atmosphere (5 of 256 runs); rolling
-    every reversal the shorter way round sinks it at the bottom of its first dip when the
-    bank is near 90 deg (6 of 1000 nominal runs).
+    roll (a 180 deg reversal then takes about 11 s). ``way`` chooses the way round of a
+    reversal (the angle flown is kept in (-180, 180] deg but with ``"through_lift_up"``):
+
+    - ``"shortest"`` (the default): to a lift-down command (beyond 90 deg) the shorter way
+      round, which never crosses lift-up to reach lift-down; to a lift-up command through
+      lift-up (the straight path in sigma), a roll under way keeping its way round when the
+      command changes.
+    - ``"lift_down_pairs"``: the straight path in sigma (through lift-up), except between two
+      lift-down banks, through lift-down; a roll under way keeps its way round (the default
+      up to session 12).
+    - ``"through_lift_up"``: always the straight path.
+
+    Measured: rolling a lift-down reversal through lift-up lofts a capsule entering shallow
+    (-5.6 deg) out of the atmosphere (5 of 256 runs); rolling every reversal the shorter way
+    round sinks it at the bottom of its first dip when the bank is near 90 deg (6 of 1000
+    nominal runs). With ``"lift_down_pairs"``, reversals commanded in quick succession at
+    the bottom of a shallow (-5.3 deg) entry's dip, a roll under way keeping its way, turned
+    the capsule through lift-up a whole revolution and lofted it out (the first roll from a
+    lift-up hold to a lift-down command crossed lift-up too).
 
     Attributes:
         max_rate: rad/s.
         max_acceleration: rad/s^2.
-        shortest: roll a reversal between two lift-down banks through lift-down (static).
+        way: ``"shortest"``, ``"lift_down_pairs"`` or ``"through_lift_up"`` (static).
     """
 
     max_rate: Scalar = eqx.field(default=math.radians(20.0), converter=jnp.asarray)
     max_acceleration: Scalar = eqx.field(default=math.radians(10.0), converter=jnp.asarray)
-    shortest: bool = eqx.field(default=True, static=True)
+    way: str = eqx.field(default="shortest", static=True)
 
     def init(self, bank: Scalar) -> BankActuatorState:
         """At rest at ``bank`` (rad)."""
@@ -509,15 +519,19 @@ class BankActuator(eqx.Module):
         |delta sigma_dot| <= a_max dt hold exactly at every step.
         """
         error = command - state.bank
-        if self.shortest:
+        if self.way != "through_lift_up":
             # Two ways round differ when |error| > pi: the straight one (through lift-up) and
-            # the wrapped one (through lift-down). A roll under way (above half the rate
-            # limit) keeps its way; one from rest between two lift-down banks rolls through
-            # lift-down.
+            # the wrapped one (through lift-down).
             wrapped = jnp.remainder(error + math.pi, 2.0 * math.pi) - math.pi
-            down = (jnp.abs(command) > 0.5 * math.pi) & (jnp.abs(state.bank) > 0.5 * math.pi)
+            command_down = jnp.abs(command) > 0.5 * math.pi
             rolling = jnp.abs(state.bank_rate) > 0.5 * self.max_rate
-            way = jnp.where(rolling, state.bank_rate * wrapped > 0.0, down)
+            keep = state.bank_rate * wrapped > 0.0  # the roll under way goes the wrapped way
+            if self.way == "shortest":
+                shorter = jnp.abs(wrapped) < jnp.abs(error)  # a tie goes straight
+                way = (command_down & shorter) | (~command_down & rolling & keep)
+            else:  # lift_down_pairs
+                down = command_down & (jnp.abs(state.bank) > 0.5 * math.pi)
+                way = jnp.where(rolling, keep, down)
             error = jnp.where(way, wrapped, error)
         # The floor keeps the gradient of sqrt finite when the command is reached (error 0).
         braking = jnp.sqrt(jnp.maximum(2.0 * self.max_acceleration * jnp.abs(error), 1e-30))
@@ -526,7 +540,7 @@ class BankActuator(eqx.Module):
         max_change = self.max_acceleration * dt
         rate = state.bank_rate + jnp.clip(target_rate - state.bank_rate, -max_change, max_change)
         bank = state.bank + rate * dt
-        if self.shortest:  # the angle flown in (-pi, pi]
+        if self.way != "through_lift_up":  # the angle flown in (-pi, pi]
             bank = jnp.where(bank > math.pi, bank - 2.0 * math.pi, bank)
             bank = jnp.where(bank <= -math.pi, bank + 2.0 * math.pi, bank)
         return BankActuatorState(bank, rate)

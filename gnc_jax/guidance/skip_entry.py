@@ -192,7 +192,8 @@ class Prediction(NamedTuple):
 
     miss_m: Scalar  # predicted range error (> 0 overshoot)
     crossrange_m: Scalar  # crossrange to the target at the end point (> 0 target on the left)
-    kind: Array  # 0 switch point reached, 1 chute reached without skip, 2 skip-out/time-out
+    kind: Array  # 0 switch point reached, 1 chute reached without skip, 2 skip-out/time-out,
+    # 4 a dive (the load beyond predictor_dive_load_g: ends short, at the last step's start)
     steps: Array  # integration steps used
 
 
@@ -486,6 +487,18 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         units="g",
         doc="load below which the predictor takes its coast step (below the Kepler-phase load)",
     )
+    predictor_dive_load_g: Scalar = param(
+        20.0,
+        lo=1.0,
+        hi=1000.0,
+        units="g",
+        doc="a prediction whose load exceeds this is a dive and ends short, where its last "
+        "step started (its range error the along-track miss there). A lift-down profile of "
+        "a high-L/D run (-5.3 deg, L/D +40 %) dives to 40 g in the prediction; at 16 s "
+        "steps RK4 then diverges (the speed to 1e7 m/s, 'above the skip-out altitude'), so "
+        "full lift down read as a skip-out, the corrector flew it, and the capsule dove in "
+        "at 52 g",
+    )
     predictor_max_steps: int = param(1000, lo=10, hi=100000, doc="predictor step budget")
     predictor_bank: str = param(
         "midpoint",
@@ -497,6 +510,39 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         "from 0.5 s steps as those of 'step' at 8 s, at 2/3 of the steps) or 'stage' (at "
         "every RK4 stage: fourth order, twice the cost per step); see "
         "benchmarks/entry_integrators.py",
+    )
+    predictor_apogee: str = param(
+        "blend",
+        choices=("step", "blend"),
+        doc="how a prediction without a Kepler phase changes to the reference bank at its "
+        "apogee: at the end of the RK4 step in which Hdot turned negative ('step': up to a "
+        "step of the first-entry bank flown past the apogee, a saw-tooth of ~100 km in the "
+        "range error along sigma_0 at 16 s steps, which the corrector cannot solve to its "
+        "tolerance), or inside the step ('blend': a step that reaches the apogee, by a linear "
+        "extrapolation of Hdot, flies the cosines of both banks weighted by the times before "
+        "and after it, so the range error is continuous in sigma_0 to first order)",
+    )
+    apogee_switch: str = param(
+        "speed",
+        choices=("apogee", "speed"),
+        doc="when the reference's switch point is its apogee (a skip without a Kepler phase: "
+        "short ranges), the second entry starts at the reference's switch speed after the "
+        "pull-up ('speed': continuous in the bank profile, as the reference is scheduled on "
+        "speed) or at the first descending point ('apogee'; see apogee_switch_margin_mps). "
+        "A run that levels off near the apogee (Hdot within a few m/s of 0 for tens of "
+        "seconds) has an apogee time that jumps with the smallest change of lift: at -5.3 "
+        "deg / 6000 km its predicted range errors scattered by +-80 km along sigma_0",
+    )
+    hold_bank: str = param(
+        "designed",
+        choices=("designed", "scenario"),
+        doc="bank held from the entry interface until the load reaches ng0_g: the designed "
+        "first-entry bank of the reference ('designed', the corrector's first guess; the "
+        "capsule rolls to it from the de-orbit attitude at the entry interface) or the "
+        "scenario's guidance.hold_bank_deg ('scenario'). Near the overshoot boundary the hold "
+        "decides the capture: at -5.3 deg the 40 s held at 60 deg, and the roll from it "
+        "through lift-up to the corrector's first lift-down command, left runs that full "
+        "lift down from the entry interface captures skipping out",
     )
     corrector_start: str = param(
         "bracket",
@@ -669,6 +715,20 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         slow = speed <= self.reference.switch_velocity_mps + self.apogee_switch_margin_mps
         return slow | ~self.reference.switch_at_apogee(self.kepler_load_g)
 
+    def _by_speed(self):
+        """Whether a skip without a Kepler phase switches on speed (see ``apogee_switch``)."""
+        return (self.apogee_switch == "speed") & self.reference.switch_at_apogee(self.kepler_load_g)
+
+    def _skip_switch(self, pulled, hdot, ng, speed):
+        """Whether a first entry that has pulled up without a Kepler phase (the load has not
+        fallen below ``kepler_load_g``) starts the second entry here: at the reference's
+        switch speed when the reference's own switch is an apogee and ``apogee_switch`` is
+        "speed", else at the first descending point (through :meth:`_apogee_gate`)."""
+        held = pulled & (ng >= self.kepler_load_g)
+        at_speed = speed <= self.reference.switch_velocity_mps
+        at_apogee = (hdot < 0.0) & self._apogee_gate(speed)
+        return held & jnp.where(self._by_speed(), at_speed, at_apogee)
+
     def _bank(self, second, sigma_0, v_0, speed):
         """Bank magnitude the prediction flies: the first-entry profile, or the reference
         after a skip without a Kepler phase (``second``)."""
@@ -703,11 +763,17 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         pulled = c.pulled_up | (alt1 > dip + self.pull_up_rise_m)
         kepler = c.kepler | (pulled & (ng1 < self.kepler_load_g))
         descending = pulled & (hdot1 < 0.0) & (ng1 >= self.kepler_load_g)
-        switch = kepler & descending
-        second = c.second | (~kepler & descending & self._apogee_gate(speed1))
+        by_speed = self._by_speed()
+        switch = kepler & descending & ~by_speed
+        # a reference switching on speed is flown from its switch speed, Kepler arc or not
+        on_speed = pulled & (speed1 <= self.reference.switch_velocity_mps)
+        crest = ~kepler & self._skip_switch(pulled, hdot1, ng1, speed1)
+        second = c.second | jnp.where(by_speed, on_speed, crest)
         chute = alt1 < self.chute_altitude_m
         skip = alt1 > self.skip_out_altitude_m
-        kind = jnp.where(switch, 0, jnp.where(chute, 1, jnp.where(skip, 2, -1))).astype(jnp.int32)
+        dive = ~(ng1 <= self.predictor_dive_load_g)  # (a NaN state too)
+        kind = jnp.where(switch, 0, jnp.where(chute, 1, jnp.where(skip, 2, -1)))
+        kind = jnp.where(dive, 4, kind).astype(jnp.int32)
         speed_bank = speed1
         if self.predictor_bank == "midpoint":  # the speed half-way through the next step
             dt_next = self.predictor_dt_s
@@ -717,6 +783,10 @@ class SkipEntryGuidance(AbstractEntryGuidance):
                 )
             speed_bank = speed1 + (0.5 * dt_next / dt) * (speed1 - c.now.speed_mps)
         cos_b1 = jnp.cos(self._bank(second, sigma_0, v_0, speed_bank))
+        if self.predictor_apogee == "blend":
+            cos_b1 = self._apogee_blend(
+                cos_b1, c.now, dt, alt1, hdot1, ng1, speed1, speed_bank, dip, pulled, kepler, second
+            )
         dy1, _ = model.vertical_plane_xyz(y1, cos_b1, density=density1)
         return _PredictorState(
             now=_Point(y1, alt1, hdot1, ng1, speed1),
@@ -732,6 +802,54 @@ class SkipEntryGuidance(AbstractEntryGuidance):
             kind=kind,
             k=c.k + 1,
         )
+
+    def _apogee_blend(
+        self,
+        cos_b1,
+        now,
+        dt_taken,
+        alt1,
+        hdot1,
+        ng1,
+        speed1,
+        speed_bank,
+        dip,
+        pulled,
+        kepler,
+        second,
+    ):
+        """Cosine of the bank of the step from ``1`` (``predictor_apogee = "blend"``): a step
+        that will reach the apogee of a skip without a Kepler phase, where the prediction
+        changes to the reference bank, flies the first-entry cosine ``cos_b1`` for the
+        fraction of the step before the apogee and the reference's after it. The time to the
+        apogee is Hdot over its rate of fall in the step just taken (from ``now``, of
+        ``dt_taken``); the vertical lift is linear in
+        the cosine, so the step's lift impulse is that of a change at the apogee to first
+        order, and the range error no longer jumps by a step of the wrong bank as sigma_0
+        moves the apogee across a step's end."""
+        dt = self.predictor_dt_s
+        if self.predictor_coast_dt_s != dt:
+            dt = jnp.where(ng1 < self.predictor_coast_load_g, self.predictor_coast_dt_s, dt)
+        # time to the switch: to the reference's switch speed, or to the apogee
+        decel = (now.speed_mps - speed1) / dt_taken
+        tau_speed = (speed1 - self.reference.switch_velocity_mps) / jnp.where(
+            decel > 0.0, decel, 1.0
+        )
+        fall = (now.hdot_mps - hdot1) / dt_taken  # -dHdot/dt over the step just taken
+        tau_apogee = hdot1 / jnp.where(fall > 0.0, fall, 1.0)
+        by_speed = self._by_speed()
+        tau = jnp.where(by_speed, tau_speed, tau_apogee)
+        coming = jnp.where(
+            by_speed,
+            (tau_speed > 0.0) & (decel > 0.0),
+            (hdot1 > 0.0) & (fall > 0.0) & self._apogee_gate(speed1),
+        )
+        at_switch = pulled | (alt1 + 0.5 * hdot1 * tau > dip + self.pull_up_rise_m)
+        no_kepler = ~kepler & (ng1 >= self.kepler_load_g)
+        blend = ~second & (by_speed | no_kepler) & coming & (tau < dt) & at_switch
+        f = jnp.clip(tau / dt, 0.0, 1.0)
+        cos_ref = jnp.cos(self.reference.bank_at(speed_bank))
+        return jnp.where(blend, f * cos_b1 + (1.0 - f) * cos_ref, cos_b1)
 
     def _end_point(self, c: _PredictorState):
         """State and time where a finished prediction ends, inside its last step (a prediction
@@ -755,6 +873,7 @@ class SkipEntryGuidance(AbstractEntryGuidance):
             c.kind == 0, a.altitude_m + w * (b.altitude_m - a.altitude_m), self.chute_altitude_m
         )
         s = hermite_crossing(a.altitude_m, a.hdot_mps, b.altitude_m, b.hdot_mps, dt, level)
+        s = jnp.where(c.kind == 4, 0.0, s)  # a dive ends at the last step's start
         h00 = 2 * s**3 - 3 * s**2 + 1
         h10 = s**3 - 2 * s**2 + s
         h01 = -2 * s**3 + 3 * s**2
@@ -784,7 +903,8 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         beyond = r_e * along_cross_track(end, here, target_fixed)[0]
         s2 = self.reference.second_entry_range(flight_variables(y_end, earth))
         overshoot = 2.0 * self.reference.range_to_go_m[0] + 1.0e7
-        miss = jnp.where(kind == 0, s2 + beyond, jnp.where(kind == 1, beyond, overshoot))
+        landed = (kind == 1) | (kind == 4)
+        miss = jnp.where(kind == 0, s2 + beyond, jnp.where(landed, beyond, overshoot))
         target = to_inertial(target_fixed, t_end, earth.rotation_rate)
         v_rel = y_end.v - jnp.cross(earth.angular_velocity(), y_end.r)
         chi = r_e * crossrange_to_target(y_end.r, v_rel, target)
@@ -911,6 +1031,12 @@ class SkipEntryGuidance(AbstractEntryGuidance):
     def funnel_m(self, speed):
         return self.funnel_base_m + self.funnel_quadratic_s2_m * speed**2
 
+    def hold_bank_rad(self, ctx: EntryGuidanceContext) -> Scalar:
+        """Bank magnitude of the hold phase (see ``hold_bank``), rad."""
+        if self.hold_bank == "designed":
+            return self.reference.first_entry_bank_rad
+        return ctx.hold_bank_rad
+
     # ---- the guidance-law protocol ----
     def init(self, nav: EntryNav, ctx: EntryGuidanceContext) -> SkipEntryState:
         """Hold phase at t = 0, with the nominal first-entry bank as the corrector's guess."""
@@ -939,7 +1065,7 @@ class SkipEntryGuidance(AbstractEntryGuidance):
             dip_altitude_m=jnp.asarray(jnp.inf),
             sigma_0=self.reference.first_entry_bank_rad,
             sign=jnp.ones(()),
-            bank_mag=ctx.hold_bank_rad,
+            bank_mag=self.hold_bank_rad(ctx),
             bank_offset=z,
             drag_ratio=jnp.ones(()),
             lift_ratio=jnp.ones(()),
@@ -992,7 +1118,7 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         )
         mag = jnp.where(
             phase == 0,
-            ctx.hold_bank_rad,
+            self.hold_bank_rad(ctx),
             jnp.where(
                 phase == 1,
                 self.profile(sigma_0, fv.speed_mps, fv.speed_mps),
@@ -1058,13 +1184,15 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         pulled = state.pulled_up | ((phase >= 1) & (fv.altitude_m > dip + self.pull_up_rise_m))
         to_kepler = live & (phase == 1) & pulled & (fv.hdot_mps > 0.0) & (ng < self.kepler_load_g)
         phase = jnp.where(to_kepler, 2, phase)
-        to_track = (
-            live
-            & ((phase == 2) | ((phase == 1) & self._apogee_gate(fv.speed_mps)))
-            & pulled
-            & (fv.hdot_mps < 0.0)
-            & (ng >= self.kepler_load_g)
+        kepler_end = (phase == 2) & pulled & (fv.hdot_mps < 0.0) & (ng >= self.kepler_load_g)
+        # (a reference switching on speed: a Kepler arc that ends faster than its switch
+        # speed goes back to the first entry, as the predictor flies it)
+        slow = ~self._by_speed() | (fv.speed_mps <= self.reference.switch_velocity_mps)
+        to_track = live & (
+            (kepler_end & slow)
+            | ((phase == 1) & self._skip_switch(pulled, fv.hdot_mps, ng, fv.speed_mps))
         )
+        phase = jnp.where(live & kepler_end & ~slow, 1, phase)
         phase = jnp.where(to_track, 3, phase)
         return phase, pulled, dip, _PhaseEvents(start, to_kepler, to_track)
 

@@ -83,10 +83,12 @@ SCHEMA = {
         "reversal": F(
             "str",
             "shortest",
-            choices=("shortest", "through_lift_up"),
-            doc="way round of a bank reversal: 'shortest' rolls a reversal between two "
-            "lift-down banks (beyond 90 deg) through lift-down, every other through lift-up; "
-            "'through_lift_up' rolls every reversal through lift-up",
+            choices=("shortest", "lift_down_pairs", "through_lift_up"),
+            doc="way round of a bank reversal: 'shortest' rolls to a lift-down bank (beyond "
+            "90 deg) the shorter way round, never through lift-up, and to a lift-up bank "
+            "through lift-up; 'lift_down_pairs' rolls through lift-down only between two "
+            "lift-down banks (a roll under way keeping its way); 'through_lift_up' rolls every "
+            "reversal through lift-up (see gnc_jax.dynamics.entry.BankActuator)",
         ),
     },
     "guidance": {

@@ -615,7 +615,7 @@ def build_from_config(cfg: dict) -> CapsuleSimulation:
         actuator=BankActuator(
             max_rate=rad(act["max_rate_dps"]),
             max_acceleration=rad(act["max_accel_dps2"]),
-            shortest=act["reversal"] == "shortest",
+            way=act["reversal"],
         ),
         dispersions=from_scenario(CapsuleDispersions, cfg),
         target_fixed=target,

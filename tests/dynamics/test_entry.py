@@ -388,7 +388,7 @@ def test_bank_reversal_ways_round():
     stays in (-180, 180]), one between lift-up banks through lift-up, and a roll under way keeps
     its way round when the command changes; ``shortest=False`` rolls every reversal through
     lift-up."""
-    default, straight = BankActuator(), BankActuator(shortest=False)
+    default, straight = BankActuator(), BankActuator(way="through_lift_up")
     down = _roll(default, 120.0, [(0.0, -120.0)])
     slack = 1.0  # deg: the discrete braking overshoots by up to max_rate dt
     assert np.all(np.abs(down) >= 120.0 - slack) and np.all(np.abs(down) <= 180.0)
