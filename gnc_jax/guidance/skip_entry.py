@@ -2,7 +2,8 @@
 
 Phases (seed 003 §2, Fig. 1):
 
-0. *hold*: the de-orbit attitude is held until the sensed load exceeds ``ng0``;
+0. *hold*: a bank is held until the sensed load exceeds ``ng0`` (the designed first-entry bank,
+   or the scenario's hold bank: ``hold_bank``);
 1. *first entry*: numerical predictor-corrector. Every ``pc_period`` the predictor integrates
    the vertical-plane dynamics with the bank profile |sigma|(v) = sigma_0 + (sigma_f - sigma_0)
    (v_0 - v)/(v_0 - v_sw), linear in Earth-relative speed from the current speed v_0 to the
@@ -11,8 +12,9 @@ Phases (seed 003 §2, Fig. 1):
    corrector (eqs. 11-15) solves for sigma_0 with the bounded regula falsi of
    :mod:`gnc_jax.root_finding`, a fixed-iteration ``lax`` loop;
 2. *Kepler*: after the pull-up, while N_g < 0.2 g (no guidance: the command is held); a
-   skip without a Kepler phase goes from 1 to 3 at its apogee (when the reference's own
-   switch is an apogee, only within ``apogee_switch_margin_mps`` of the reference's speed);
+   skip without a Kepler phase goes from 1 to 3 at its apogee, or, when the reference's own
+   switch is an apogee, at the reference's switch speed (``apogee_switch``), where a Kepler
+   arc that ends faster also goes back to 1;
 3. *second entry*: reference-trajectory tracking, cos sigma_c = [(L/D)_0 cos sigma_0 + K.Delta]
    / (L/D) (eq. 6 without its repeated K.Delta, a typo) with the feedback of eq. 7 on the drag
    load N_gx, Ḣ, the range to go S and its rate; the reference bank profile is corrected once

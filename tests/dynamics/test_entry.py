@@ -403,3 +403,22 @@ def test_bank_reversal_ways_round():
     old = _roll(straight, 120.0, [(0.0, -120.0)])
     assert np.min(np.abs(old)) < 1.0
     np.testing.assert_allclose(old[-1], -120.0, atol=1e-9)
+
+
+def test_a_reversal_to_lift_down_never_rolls_through_lift_up():
+    """``way = "shortest"`` (the default): from a lift-up hold (+60 deg) to a lift-down
+    command (-178 deg) the capsule rolls through lift-down (the old ``"lift_down_pairs"``
+    rolled 238 deg through lift-up); reversals commanded in quick succession between lift-down
+    banks keep the bank beyond 90 deg, where the old rule, a roll under way keeping its way,
+    turned it through lift-up."""
+    new, old = BankActuator(), BankActuator(way="lift_down_pairs")
+    down = _roll(new, 60.0, [(0.0, -178.0)])
+    assert np.min(np.abs(down)) >= 60.0 - 1e-9
+    np.testing.assert_allclose(down[-1], -178.0, atol=1e-9)
+    assert np.min(np.abs(_roll(old, 60.0, [(0.0, -178.0)]))) < 1.0
+    # -118 -> +118 through lift-down; 6 s later, still rolling, the sign flips back
+    chatter = [(0.0, 118.0), (6.0, -124.0)]
+    back = _roll(new, -118.0, chatter)
+    assert np.min(np.abs(back)) > 115.0
+    np.testing.assert_allclose(back[-1], -124.0, atol=1e-9)
+    assert np.min(np.abs(_roll(old, -118.0, chatter))) < 1.0  # a whole turn through lift-up

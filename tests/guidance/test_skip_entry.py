@@ -1,5 +1,8 @@
 """The capsule law as a member of the entry-guidance family: registry, ratio filter, schedule."""
 
+import dataclasses
+
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -83,7 +86,11 @@ def test_guidance_holds_then_runs_the_corrector_every_pc_every_steps(law_and_ctx
     high = nav_at(state_at(119e3, ctx))  # almost no load: hold
     state = law.init(high, ctx)
     command, held = step(state, high, 0.0, ctx)
-    assert int(held.phase) == 0 and float(command) == float(ctx.hold_bank_rad)
+    # the hold flies the designed first-entry bank (hold_bank = "designed"), or the scenario's
+    assert int(held.phase) == 0 and float(command) == float(law.reference.first_entry_bank_rad)
+    scenario_hold = dataclasses.replace(law, hold_bank="scenario")
+    command, _ = scenario_hold.step(scenario_hold.init(high, ctx), high, 0.0, ctx)
+    assert float(command) == float(ctx.hold_bank_rad) != float(law.reference.first_entry_bank_rad)
     assert int(held.log.pc_cycles) == 0
 
     y = state_at(65e3, ctx, fpa_deg=-6.0)
@@ -321,17 +328,17 @@ def test_switch_point_is_smooth_in_the_bank(law_and_ctx):
 
 
 def test_a_fast_crest_is_not_an_apogee_switch(law_and_ctx):
-    """A reference without a Kepler phase (its switch point is the skip's apogee, drag load
-    above the threshold there) starts tracking at a pulled-up descent only within
+    """With ``apogee_switch = "apogee"``, a reference without a Kepler phase (its switch point
+    is the skip's apogee, drag load above the threshold there) starts tracking at a pulled-up
+    descent only within
     ``apogee_switch_margin_mps`` of its switch speed; a crest 500 m/s faster (a ripple deep in
     the atmosphere) stays in the first entry, in the law and in its predictor. A reference
     ending a Kepler arc (the packaged one) is not gated."""
-    import equinox as eqx
-
     _, law, ctx = law_and_ctx
     ref = law.reference
     assert not bool(ref.switch_at_apogee(law.kepler_load_g))
     apogee = eqx.tree_at(lambda g: g.reference.drag_load_g, law, ref.drag_load_g.at[0].set(0.6))
+    apogee = dataclasses.replace(apogee, apogee_switch="apogee")
     assert bool(apogee.reference.switch_at_apogee(apogee.kepler_load_g))
     m = ctx.model
     y = state_at(61.6e3, ctx)
@@ -390,3 +397,83 @@ def test_first_entry_reversal_threshold_narrows_towards_the_kepler_load(law_and_
             jnp.asarray(ng),
         )
         assert bool(reverse) == reverses and float(sign) == (-1.0 if reverses else 1.0)
+
+
+def test_a_reference_without_a_kepler_phase_is_switched_to_on_speed(law_and_ctx):
+    """``apogee_switch = "speed"`` (the default) with a reference whose switch point is an
+    apogee: a pulled-up first entry starts tracking at the reference's switch speed, climbing
+    or not, and not before; a Kepler arc that ends faster than that goes back to the first
+    entry (the predictor flies it so), one that ends slower starts tracking. In the predictor
+    the same reference is flown from the switch speed to the chute: no prediction ends at a
+    Kepler switch point (eq. 10 expands around an apogee there)."""
+    _, law, ctx = law_and_ctx
+    ref = law.reference
+    apogee = eqx.tree_at(lambda g: g.reference.drag_load_g, law, ref.drag_load_g.at[0].set(0.6))
+    assert bool(apogee._by_speed()) and not bool(law._by_speed())
+    m = ctx.model
+    y = state_at(61.6e3, ctx)
+    nav = EntryNav(y, *drag_and_lift(y, m.vehicle, m.earth, m.atmosphere))
+    live = jnp.asarray(True)
+    v_sw = float(ref.switch_velocity_mps)
+    cases = [  # (phase, pulled, speed above v_sw, hdot, load) -> phase
+        (1, True, 50.0, -5.0, 1.5, 1),  # descending but faster than v_sw: first entry
+        (1, True, -10.0, 20.0, 1.5, 3),  # climbing, at v_sw: tracking
+        (1, False, -10.0, -20.0, 1.5, 1),  # not pulled up: first entry
+        (2, True, 80.0, -5.0, 0.25, 1),  # Kepler arc ends fast: back to the first entry
+        (2, True, -5.0, -5.0, 0.25, 3),  # Kepler arc ends slow: tracking
+        (2, True, -5.0, 5.0, 0.1, 2),  # still in the arc
+    ]
+    for phase0, pulled, dv, hdot, ng, want in cases:
+        state = apogee.init(nav, ctx)._replace(
+            phase=jnp.asarray(phase0),
+            pulled_up=jnp.asarray(pulled),
+            dip_altitude_m=jnp.asarray(61.6e3 if pulled else 62.5e3),
+        )
+        fv = FlightVariables(jnp.asarray(v_sw + dv), jnp.asarray(0.0), 62e3, jnp.asarray(hdot))
+        phase, *_ = apogee._phase_events(state, fv, jnp.asarray(ng), live)
+        assert int(phase) == want, (phase0, pulled, dv, hdot, ng)
+    # predictions of the flight's corrector cycles: the packaged (Kepler) reference ends some
+    # at the switch point; the same cycles with an apogee reference all fly to the chute
+    y, t, up, sigma, model = _corrector_cycles(law_and_ctx, every=8)
+    kinds = {}
+    for g in (law, apogee):
+        predict = jax.vmap(
+            lambda g, y, t, u, s, m: g.predict(y, t, u, s, m, ctx.target_fixed),
+            in_axes=(None, 0, 0, 0, 0, 0),
+        )
+        p = jax.jit(predict)(g, y, t, up, jnp.asarray(sigma), model)
+        kinds[g is law] = set(np.asarray(p.kind).tolist())
+    assert 0 in kinds[True]
+    assert kinds[False] <= {1, 2, 4} and 1 in kinds[False]
+
+
+def test_a_predicted_dive_ends_short_instead_of_diverging(law_and_ctx):
+    """A full lift-down profile of a high-L/D run (the measured ratios of a -5.3 deg run with
+    lift +22 %, drag -12 %) from 64 km, 11 km/s, -3.5 deg dives through 40 g. At 16 s steps
+    RK4 then diverges: unguarded (``predictor_dive_load_g`` 1000 g) it returns nonsense (a
+    'switch point' 24,000 km short, or a skip-out, as a -5.3 deg run's corrector read full
+    lift down before flying it into the ground at 52 g). The guard ends it as a dive (kind 4),
+    finite and short of the target like the same prediction at 1 s steps (which lands)."""
+    from gnc_jax.dynamics.entry import EntryState
+    from gnc_jax.guidance.entry_common import EntryModel
+
+    _, law, ctx = law_and_ctx
+    c = ctx.model
+    model = EntryModel(c.vehicle, c.earth, c.atmosphere, jnp.asarray(0.824), jnp.asarray(1.151))
+    y0 = entry_state_from_conditions(
+        EntryConditions(64e3, 11.0e3, np.radians(-3.5), 0.6, 1.0, 0.2), c.earth
+    )
+    y = EntryState(y0.r, y0.v)
+
+    @jax.jit
+    def predict(g):
+        pull = jnp.asarray(False)
+        return g.predict(y, 0.0, pull, jnp.radians(180.0), model, ctx.target_fixed)
+
+    unguarded = eqx.tree_at(lambda g: g.predictor_dive_load_g, law, 1000.0)
+    guarded, diverged = predict(law), predict(unguarded)
+    fine = predict(dataclasses.replace(unguarded, predictor_dt_s=1.0, predictor_coast_dt_s=1.0))
+    assert int(fine.kind) == 1 and float(fine.miss_m) < -1000e3  # lands far short
+    assert int(guarded.kind) == 4
+    np.testing.assert_allclose(float(guarded.miss_m), float(fine.miss_m), rtol=0.1)
+    assert int(diverged.kind) != 1  # the 16 s steps without the guard: not a landing
