@@ -69,6 +69,10 @@ SIGMA_1_STEP_RAD = math.radians(2.0)
 # bracketing then straddles the jump to the direct entry and the solve stalls at its guess.
 SIGMA_1_FINE_STEP_RAD = math.radians(0.05)
 SIGMA_1_BRACKET_STEPS = 12
+# The reach check's second look (require_reachable) when no coarse candidate skips and lands:
+# at the overshoot boundary that window can fall between two coarse candidates (L/D 0.40,
+# beta 250 kg/m^2, -5.2 deg, 0.25 deg inside the corridor: refused at the coarse step).
+SIGMA_1_REACH_FINE_STEP_RAD = math.radians(0.25)
 SIGMA_1_GUESS_RAD = 1.2915  # 74 deg
 PROFILE_INIT_RAD = (1.0472, 1.0472)  # 60 deg
 # The second-entry profile keeps cos(sigma) within 0.71 of full lift: the tracking law divides
@@ -357,6 +361,14 @@ def require_reachable(problem: NominalProblem, entry: dict, vehicle: dict, guess
         f"{np.degrees(PROFILE_BOUNDS_RAD[1]):.0f} deg"
     )
     lands = fate == SKIP_LANDS
+    if not lands.any():  # a second look on a fine grid (SIGMA_1_REACH_FINE_STEP_RAD)
+        lo, hi = SIGMA_1_BOUNDS_RAD
+        fine = np.append(np.arange(lo, hi, SIGMA_1_REACH_FINE_STEP_RAD), hi)
+        fine_flights = _candidate_flights(problem, jnp.asarray(fine), jnp.asarray(_profile_banks()))
+        fine_err, fine_fate = (np.asarray(x) for x in fine_flights)
+        if (fine_fate == SKIP_LANDS).any():
+            banks, err_m, fate = fine, fine_err, fine_fate
+            lands = fate == SKIP_LANDS
     if not lands.any():
         if (fate == NEVER_LANDS).all():
             what = "skips out (never reaches the chute altitude)"
