@@ -162,6 +162,28 @@ def test_the_fine_first_guess_at_the_overshoot_boundary_brackets_a_falling_root(
     assert err[1] > 0.0 > err[2] or err[0] > 0.0 > err[1]
 
 
+def test_the_reach_check_looks_again_on_a_fine_grid_at_the_overshoot_boundary(monkeypatch):
+    # -5.3 deg: the banks that skip and land span 118.1..120.6 deg. With coarse candidates 7 deg
+    # apart (74 + 7k: 116, 123) none skips and lands; the reach check's second look, on its
+    # 0.25 deg grid, finds the window and returns a first guess inside it. With that look as
+    # coarse as 6 deg (111, 117, 123) the entry is refused, as every such cell was before.
+    sc = gj.load_scenario(
+        "lunar-skip-entry", overrides=["entry.fpa_deg=-5.3", "entry.range_km=6000"]
+    )
+    problem = _problem(sc)
+    entry, vehicle = sc.config["entry"], sc.config["vehicle"]
+    monkeypatch.setattr(rd, "SIGMA_1_STEP_RAD", math.radians(7.0))
+    coarse = rd.candidate_banks()
+    assert not np.any((coarse > math.radians(118.0)) & (coarse < math.radians(120.7)))
+    lo, hi, guess = rd.require_reachable(problem, entry, vehicle)
+    assert 118.0 < math.degrees(guess) < 120.7
+    assert lo < 6000.0 < hi
+    monkeypatch.setattr(rd, "SIGMA_1_REACH_FINE_STEP_RAD", math.radians(6.0))
+    with pytest.raises(gj.ScenarioError) as e:
+        rd.require_reachable(problem, entry, vehicle)
+    assert _one_line(e).startswith("entry.fpa_deg: -5.3 deg; the nominal flight never both")
+
+
 def _miss_km(o):
     return np.maximum(np.abs(o["downrange_err_km"]), np.abs(o["crossrange_err_km"]))
 
