@@ -221,7 +221,11 @@ def test_a_miss_beyond_the_limit_is_out_of_domain_and_left_out_of_the_statistics
     [
         # lift held up for the whole flight (guidance never starts): skips out of the atmosphere
         (
-            ["guidance.hold_bank_deg=0", "guidance.skip_entry.ng0_g=5"],
+            [
+                "guidance.hold_bank_deg=0",
+                "guidance.skip_entry.hold_bank=scenario",
+                "guidance.skip_entry.ng0_g=5",
+            ],
             Status.skip_out,
         ),
         # the seed's corrector (eq. 15 bracketing), which cannot reach a 1 m tolerance in 3

@@ -98,8 +98,10 @@ SCHEMA = {
             lo=0.0,
             hi=180.0,
             units="deg",
-            doc="bank held from the entry interface until the sensed load reaches the law's "
-            "ng0 (skip_entry: ng0_g), when guidance starts",
+            doc="the de-orbit attitude at the entry interface; the skip_entry law holds it "
+            "until the sensed load reaches ng0_g only with guidance.skip_entry.hold_bank = "
+            "'scenario' (its default, 'designed', rolls to the designed first-entry bank and "
+            "holds that)",
         ),
         "pc_period_s": F(
             "float",
