@@ -517,12 +517,12 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         "blend",
         choices=("step", "blend"),
         doc="how a prediction without a Kepler phase changes to the reference bank at its "
-        "apogee: at the end of the RK4 step in which Hdot turned negative ('step': up to a "
-        "step of the first-entry bank flown past the apogee, a saw-tooth of ~100 km in the "
-        "range error along sigma_0 at 16 s steps, which the corrector cannot solve to its "
-        "tolerance), or inside the step ('blend': a step that reaches the apogee, by a linear "
-        "extrapolation of Hdot, flies the cosines of both banks weighted by the times before "
-        "and after it, so the range error is continuous in sigma_0 to first order)",
+        "switch (the apogee, or the reference's switch speed: apogee_switch): at the end of "
+        "the RK4 step in which it falls ('step': up to a step of the first-entry bank flown "
+        "past it, a saw-tooth of ~100 km in the range error along sigma_0 at 16 s steps), or "
+        "inside the step ('blend': a step that reaches it, by a linear extrapolation of Hdot "
+        "or the speed, flies the cosines of both banks weighted by the times before and after "
+        "it, so the range error is continuous in sigma_0 to first order)",
     )
     apogee_switch: str = param(
         "speed",
@@ -821,14 +821,15 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         second,
     ):
         """Cosine of the bank of the step from ``1`` (``predictor_apogee = "blend"``): a step
-        that will reach the apogee of a skip without a Kepler phase, where the prediction
-        changes to the reference bank, flies the first-entry cosine ``cos_b1`` for the
-        fraction of the step before the apogee and the reference's after it. The time to the
-        apogee is Hdot over its rate of fall in the step just taken (from ``now``, of
-        ``dt_taken``); the vertical lift is linear in
-        the cosine, so the step's lift impulse is that of a change at the apogee to first
-        order, and the range error no longer jumps by a step of the wrong bank as sigma_0
-        moves the apogee across a step's end."""
+        that will reach the switch of a skip without a Kepler phase (its apogee, or the
+        reference's switch speed when ``_by_speed``), where the prediction changes to the
+        reference bank, flies the first-entry cosine ``cos_b1`` for the fraction of the step
+        before the switch and the reference's after it. The time to the switch is Hdot (or
+        the speed above the switch speed) over its rate of fall in the step just taken (from
+        ``now``, of ``dt_taken``); the vertical lift is linear in the cosine, so the step's
+        lift impulse is that of a change at the switch to first order, and the range error no
+        longer jumps by a step of the wrong bank as sigma_0 moves the switch across a step's
+        end."""
         dt = self.predictor_dt_s
         if self.predictor_coast_dt_s != dt:
             dt = jnp.where(ng1 < self.predictor_coast_load_g, self.predictor_coast_dt_s, dt)
