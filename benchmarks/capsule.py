@@ -56,9 +56,9 @@ import numpy as np
 
 import gnc_jax as gj  # first: float64 and one XLA device per core
 from gnc_jax.dynamics.entry import EntryArgs, entry_vector_field_xyz, to_xyz
-from gnc_jax.guidance.entry_common import EntryNav, drag_and_lift
+from gnc_jax.guidance.entry.base import EntryNav, drag_and_lift
 from gnc_jax.integrate import rk4_step
-from gnc_jax.simulation import capsule as capsule_sim
+from gnc_jax.systems.capsule import simulation as capsule_sim
 
 SCENARIO = "lunar-skip-entry"
 FIGURES = Path(__file__).resolve().parent / "figures"
@@ -189,7 +189,7 @@ def predictor_step(sim, law, n, repeats):
     _, trace = gj.simulate_one(gj.load_scenario(SCENARIO), index=0, seed=0)
     i = int(np.flatnonzero(trace.corrector_evals > 0)[10])
     from gnc_jax.dynamics.entry import EntryState
-    from gnc_jax.guidance.entry_common import EntryModel
+    from gnc_jax.guidance.entry.base import EntryModel
 
     model = EntryModel(sim.vehicle, sim.earth, sim.atmosphere)
     y = EntryState(jnp.asarray(trace.r_m[i]), jnp.asarray(trace.v_mps[i]))

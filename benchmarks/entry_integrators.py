@@ -32,7 +32,7 @@ from scipy.integrate import solve_ivp
 
 import gnc_jax as gj  # first: float64, host devices
 from gnc_jax.dynamics.entry import EntryState
-from gnc_jax.guidance.entry_common import EntryModel
+from gnc_jax.guidance.entry.base import EntryModel
 from gnc_jax.integrate import RK4, RK6_BUTCHER, integrate_fixed
 
 T_ARC = 800.0

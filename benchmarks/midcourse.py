@@ -19,7 +19,7 @@ import jax.numpy as jnp
 from _timing import best_of  # benchmarks/_timing.py
 
 import gnc_jax as gj  # first: float64 and one XLA device per core
-from gnc_jax.simulation import midcourse
+from gnc_jax.systems.midcourse import simulation as midcourse
 
 SCENARIOS = {
     "autodiff": "phoenix-midcourse",

@@ -5,7 +5,7 @@ python examples/apn_trigger_sweep.py [out_dir]
 Runs the three error-free laws (variable N0 = 8, k = 2; constant N = 3; constant N = 8) for a
 sweep of the on-threshold with the off-threshold fixed at its default (the smallest at which
 the minimum-gain law stops cleanly at the last firing opportunity), and sets each closed-loop
-result beside the closed-form estimate of ``gnc_jax.guidance.apn.pulse_train_estimate``.
+result beside the closed-form estimate of ``gnc_jax.guidance.intercept.apn.pulse_train_estimate``.
 Writes ``trigger_sweep.md`` (table) and ``trigger_sweep.png`` to ``out_dir``
 (default ``results/apn-trigger-sweep``).
 
@@ -19,7 +19,7 @@ import pathlib
 import sys
 
 import gnc_jax as gj  # import first: float64 and one XLA device per core
-from gnc_jax.simulation.pn import estimate_pulse_trains
+from gnc_jax.systems.intercept.system import estimate_pulse_trains
 
 LAWS = {"variable": "bennu-apn-ideal", "N = 3": "bennu-pn3-ideal", "N = 8": "bennu-pn8-ideal"}
 TRIGGER_OFF = 0.5  # x a_ref: the default

@@ -13,7 +13,7 @@ import jax
 import jax.numpy as jnp
 
 import gnc_jax as gj  # import first: float64 and one XLA device per core
-from gnc_jax.simulation import midcourse
+from gnc_jax.systems.midcourse import simulation as midcourse
 
 # 1. One correction at E-238 d, 289 km / 0.577 m/s dispersion, by each sensitivity method.
 for name in ("phoenix-midcourse", "phoenix-midcourse-cd", "phoenix-midcourse-stm"):

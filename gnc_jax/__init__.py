@@ -16,18 +16,19 @@ alone; see ``gnc_jax._config``); import it before anything runs a JAX computatio
 
 from . import _config  # noqa: F401  (float64, host devices: must run before jax is used)
 from ._status import Status
-from .montecarlo import CostEstimate, Study, build, estimate_cost, run_key, run_study, simulate_one
+from ._version import __version__
+from .montecarlo import CostEstimate, build, estimate_cost, run_key, simulate_one
 from .operating_envelope import Envelope, envelope
 from .report import report
 from .reproduction import reproduce
 from .results import ResultsError, load_results
 from .scenario import Scenario, ScenarioError, list_scenarios, load_scenario
+from .study import Study, run_study
 from .systems import AbstractSystem, get_system, register_system, systems
 from .tuning import TuneResult, tune
 
-__version__ = "0.1.0"
-
 __all__ = [
+    "__version__",
     "Status",
     "Envelope",
     "envelope",

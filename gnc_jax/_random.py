@@ -6,8 +6,15 @@ others, and a per-event stream (image ``i``) is folded once more by the event's 
 """
 
 import jax
+import jax.numpy as jnp
 
 from ._types import Array, Float, PRNGKeyArray
+
+
+def run_key(seed: int, index) -> PRNGKeyArray:
+    """The key of run ``index`` of a study with root seed ``seed``: ``fold_in(root, index)``,
+    so a run's draws never depend on the batch, the chunking, the devices or the workers."""
+    return jax.random.fold_in(jax.random.key(jnp.asarray(seed, dtype=jnp.uint32)), index)
 
 
 def stream_key(key: PRNGKeyArray, stream: int, index=None) -> PRNGKeyArray:
@@ -21,4 +28,4 @@ def stream_normal(key: PRNGKeyArray, stream: int, shape=(3,)) -> Float[Array, ".
     return jax.random.normal(stream_key(key, stream), shape)
 
 
-__all__ = ["stream_key", "stream_normal"]
+__all__ = ["run_key", "stream_key", "stream_normal"]

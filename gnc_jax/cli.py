@@ -154,8 +154,8 @@ def _connect(address: str):
 
 
 def cmd_run(args) -> int:
-    from .montecarlo import run_study
     from .scenario import ScenarioError, load_scenario
+    from .study import run_study
 
     scenario = load_scenario(args.scenario, overrides=args.set or ())
     if args.out:
@@ -485,9 +485,9 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     import gnc_jax  # noqa: F401  (float64 and host devices before JAX starts)
 
-    from .montecarlo import StudyError
     from .results import ResultsError
     from .scenario import ScenarioError
+    from .study import StudyError
 
     try:
         return args.func(args)

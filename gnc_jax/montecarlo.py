@@ -1,4 +1,6 @@
-"""Monte Carlo studies: one ``vmap``ped single-trajectory simulator, sharded over host devices.
+"""The Monte Carlo engine: one ``vmap``ped single-trajectory simulator, sharded over host
+devices, compiled ahead of time and run chunk by chunk (locally or on Dask workers); the cost
+estimate and the memory guard; single runs and traces. :mod:`gnc_jax.study` builds studies on it.
 
 Run ``i`` of a study with root seed ``s`` always uses the key
 ``jax.random.fold_in(jax.random.key(s), i)``, so a run's result never depends on the batch size,
@@ -9,22 +11,16 @@ Compilation happens once, ahead of time, and is timed separately from the study.
 
 import dataclasses
 import functools
-import hashlib
 import os
-import sys
 import time
-from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, PartitionSpec
-from tqdm.auto import tqdm
 
-from ._status import Status
-from .results import save_study, summarize
+from ._random import run_key
 from .scenario import Scenario, ScenarioError
-from .store import chunk_files
 from .systems.base import AbstractSystem, get_system
 
 
@@ -32,11 +28,6 @@ def build(scenario: Scenario):
     """``(params, law)`` of a scenario, built by its system (SI units): what
     :func:`simulate_one` and :func:`run_study` run, for your own loops."""
     return get_system(scenario.kind).build(scenario)
-
-
-def run_key(seed: int, index):
-    """The key of run ``index`` of a study with root seed ``seed``."""
-    return jax.random.fold_in(jax.random.key(jnp.asarray(seed, dtype=jnp.uint32)), index)
 
 
 def batch_function(system: AbstractSystem, n_devices: int | None = None):
@@ -188,303 +179,6 @@ def _compile(system, fn, n_dev, sim, law, seed_arr, chunk):
         _COMPILED.pop(next(iter(_COMPILED)))
     _COMPILED[key] = compiled
     return compiled, compile_s
-
-
-@dataclasses.dataclass
-class Study:
-    """Result of a Monte Carlo study.
-
-    Attributes:
-        outcomes: per-run arrays keyed by outcome field (first axis = run index); for a study
-            written to a directory (``run_study(..., out=DIR)``) they are read from its chunk
-            files when first used, and :meth:`summary` reads only the columns it needs.
-        compile_s: ahead-of-time compilation time (0 when an executable compiled earlier in
-            this process was reused); wall_s: the study's wall time after compilation.
-        path: the study directory, if written to one; chunk_errors: chunks that raised
-            (``{"chunk", "runs": [start, stop], "error"}``), their runs missing from the study.
-    """
-
-    scenario: Scenario
-    runs: int
-    seed: int
-    _outcomes: dict[str, np.ndarray] | None = dataclasses.field(repr=False)
-    compile_s: float
-    wall_s: float
-    n_devices: int
-    chunk_size: int
-    path: Any = None
-    chunk_errors: tuple = ()
-    workers: int | None = None
-
-    def __post_init__(self):
-        if self._outcomes is None and self.path is None:
-            raise ValueError("a Study needs its outcomes or the directory holding them")
-
-    @property
-    def outcomes(self) -> dict[str, np.ndarray]:
-        return self.columns()
-
-    def columns(self, names=None) -> dict[str, np.ndarray]:
-        """The outcome arrays ``names`` (all by default), from memory or the chunk files."""
-        if self._outcomes is not None:
-            return self._outcomes if names is None else {k: self._outcomes[k] for k in names}
-        from .store import read_outcomes
-
-        if names is None:
-            self._outcomes = read_outcomes(self.path)
-            return self._outcomes
-        return read_outcomes(self.path, names)
-
-    @property
-    def status(self) -> np.ndarray:
-        return self.columns(["status"])["status"]
-
-    @property
-    def ok(self) -> np.ndarray:
-        return self.status == Status.ok
-
-    def summary(self) -> dict[str, Any]:
-        return summarize(self)
-
-    def save(self, out_dir, overwrite: bool = False) -> dict[str, str]:
-        """Write the study into ``out_dir`` (the layout of ``gnc_jax.store``); a directory
-        that holds another study is refused unless ``overwrite``."""
-        return save_study(self, out_dir, overwrite=overwrite)
-
-
-def _nan_to_status(outcomes: dict[str, np.ndarray]) -> None:
-    """Flag any run with a non-finite float outcome as ``nan`` (in place)."""
-    bad = np.zeros(outcomes["status"].shape, bool)
-    for arr in outcomes.values():
-        if np.issubdtype(arr.dtype, np.floating):
-            bad |= ~np.isfinite(arr.reshape(arr.shape[0], -1)).all(axis=1)
-    outcomes["status"] = np.where(
-        bad & (outcomes["status"] == Status.ok), Status.nan, outcomes["status"]
-    ).astype(np.int32)
-
-
-def run_study(
-    scenario: Scenario,
-    runs: int | None = None,
-    seed: int | None = None,
-    chunk_size: int | None = None,
-    progress: bool | None = None,
-    n_devices: int | None = None,
-    max_hours: float = MAX_HOURS,
-    max_memory_fraction: float = MAX_MEMORY_FRACTION,
-    out=None,
-    resume: bool = False,
-    overwrite: bool = False,
-    client=None,
-    workers: int | None = None,
-) -> Study:
-    """Run a Monte Carlo study of ``scenario``.
-
-    Args:
-        scenario: from :func:`gnc_jax.load_scenario`.
-        runs: number of runs (default: the scenario's paper run count).
-        seed: root seed (default: the scenario's).
-        chunk_size: runs per compiled call (default: equal chunks of at most the system's
-            ``chunk_per_device`` runs per device, or 1024 runs; a resumed study keeps its own).
-        progress: show a progress bar (default: when stderr is a terminal and there are
-            several chunks).
-        n_devices: host devices to shard over (default: all).
-        max_hours: refuse (:class:`~gnc_jax.scenario.ScenarioError`, before the reference
-            design or compilation) a study whose :func:`estimate_cost` exceeds this many hours.
-        max_memory_fraction: refuse a chunk whose compiled program needs more than this
-            fraction of the machine's physical memory (checked after compilation, before any
-            run).
-        out: a study directory (``gnc_jax.store``): each chunk is written there as soon as it
-            finishes, the summary and scenario last; the returned study reads its outcomes
-            from there. A directory holding another study is refused.
-        resume: continue the study already in ``out`` (same scenario, seed, runs, chunk size
-            and code version): finished chunks are kept, missing or damaged ones computed.
-        overwrite: replace a study already in ``out`` as a whole.
-        client: a ``dask.distributed.Client``: the chunks run as tasks on its workers (each
-            worker compiles once per process; results come back to this process).
-        workers: start a local Dask cluster of this many worker processes for the study
-            (the cores are split between them).
-
-    A study estimated to take more than ``ANNOUNCE_S`` seconds prints its estimate to stderr
-    and runs in chunks of about 10 s each so that the progress bar has an ETA. Per-run
-    outcomes do not depend on the chunk size, the devices, the workers or on resuming.
-    Ctrl-C stops between chunks; the chunks already written to ``out`` are kept.
-    """
-    runs = scenario.runs if runs is None else runs
-    seed = scenario.seed if seed is None else seed
-    if isinstance(runs, bool) or not isinstance(runs, int) or runs <= 0:
-        raise ScenarioError(f"runs: {runs!r}; allowed: an integer >= 1")
-    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**32:
-        raise ScenarioError(f"seed: {seed!r}; allowed: an integer in [0, 2^32)")
-    if chunk_size is not None and (
-        isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size <= 0
-    ):
-        raise ScenarioError(f"chunk_size: {chunk_size!r}; allowed: an integer >= 1")
-    if workers is not None and (
-        isinstance(workers, bool) or not isinstance(workers, int) or workers <= 0
-    ):
-        raise ScenarioError(f"workers: {workers!r}; allowed: an integer >= 1")
-    if client is not None and workers is not None:
-        raise ScenarioError("workers: given with a client; allowed: one of client or workers")
-    if (resume or overwrite) and out is None:
-        raise ScenarioError("resume/overwrite: no study directory; allowed: with out=DIR")
-    if resume and overwrite:
-        raise ScenarioError("resume and overwrite: both given; allowed: one of them")
-    for name, value, hi in (
-        ("max_hours", max_hours, None),
-        ("max_memory_fraction", max_memory_fraction, 1.0),
-    ):
-        if (
-            isinstance(value, bool)
-            or not isinstance(value, (int, float))
-            or not (value > 0 and (hi is None or value <= hi))
-        ):
-            raise ScenarioError(
-                f"{name}: {value!r}; allowed: a number > 0" + (f" and <= {hi:g}" if hi else "")
-            )
-    system = get_system(scenario.kind)
-    cost = estimate_cost(scenario, runs, n_devices)
-    if cost.seconds is not None and cost.seconds > max_hours * 3600:
-        raise ScenarioError(
-            f"cost: {cost}; allowed: at most {max_hours:g} h (raise max_hours, CLI --max-hours, "
-            "or use fewer runs or a coarser step)"
-        )
-    if resume and chunk_size is None:
-        chunk_size = _recorded_chunk_size(out)
-    announce = cost.seconds is not None and cost.seconds > ANNOUNCE_S and progress is not False
-    if announce:
-        print(f"{scenario.name}: estimated {cost}", file=sys.stderr)
-    distributed = client is not None or workers is not None
-    n_dev = min(n_devices or len(jax.devices()), len(jax.devices()))
-    default_chunk = system.chunk_per_device * n_dev if system.chunk_per_device else 1024
-    if chunk_size is None and announce:  # chunks of about 10 s: a progress bar with an ETA
-        default_chunk = int(max(1, min(default_chunk, 10.0 * runs / cost.seconds)))
-    chunk = min(runs, chunk_size or default_chunk)
-    if chunk_size is None:  # equal chunks: the last one is not mostly padding
-        chunk = -(-runs // -(-runs // chunk))
-    if not distributed:
-        chunk = padded_chunk(chunk, n_dev, system.vector_lanes)
-    n_chunks = -(-runs // chunk)
-    bounds = [(c * chunk, min((c + 1) * chunk, runs)) for c in range(n_chunks)]
-
-    store = None
-    if out is not None:
-        from .store import StudyStore, code_version
-
-        manifest = dict(
-            scenario_name=scenario.name,
-            kind=scenario.kind,
-            scenario_sha256=hashlib.sha256(scenario.to_toml().encode()).hexdigest(),
-            seed=seed,
-            runs=runs,
-            chunk_size=chunk,
-            code_version=code_version(),
-        )
-        store = StudyStore(out, manifest, resume=resume, overwrite=overwrite)
-    try:
-        todo = [c for c in range(n_chunks) if store is None or not store.valid_chunk(c, *bounds[c])]
-        show = (
-            progress
-            if progress is not None
-            else (n_chunks > 1 and (sys.stderr.isatty() or announce))
-        )
-        bar = tqdm(
-            total=runs,
-            initial=sum(bounds[c][1] - bounds[c][0] for c in range(n_chunks) if c not in todo),
-            desc=scenario.name,
-            unit="run",
-            disable=not show,
-        )
-        parts: dict[int, dict] = {}
-
-        def finished(c, outcomes):
-            start, stop = bounds[c]
-            outcomes = {k: np.asarray(v)[: stop - start] for k, v in outcomes.items()}
-            _nan_to_status(outcomes)
-            if store is not None:
-                store.write_chunk(c, start, outcomes)
-            else:
-                parts[c] = outcomes
-            bar.update(stop - start)
-
-        t0 = time.perf_counter()
-        try:
-            if distributed:
-                compile_s, errors, n_workers, t0 = _run_distributed(
-                    scenario, seed, todo, bounds, chunk, client, workers, finished
-                )
-                t0 += compile_s  # the workers compile first, all at once
-            else:
-                compile_s, t0 = _run_local(
-                    scenario, system, seed, todo, chunk, n_devices, max_memory_fraction, finished
-                )
-                errors, n_workers = [], None
-        except KeyboardInterrupt:
-            if store is not None:
-                kept = len(chunk_files(store.path))
-                print(
-                    f"{scenario.name}: interrupted; {kept} of {n_chunks} chunks kept in "
-                    f"{store.runs_dir} (the same command with --resume continues)",
-                    file=sys.stderr,
-                )
-            raise
-        finally:
-            bar.close()
-        wall_s = time.perf_counter() - t0
-        if errors:
-            where = f"; the other chunks are in {store.runs_dir}, --resume retries" if store else ""
-            raise StudyError(
-                f"{scenario.name}: {len(errors)} of {n_chunks} chunks raised: "
-                + "; ".join(
-                    f"chunk {e['chunk']} (runs {e['runs'][0]}..{e['runs'][1] - 1}): {e['error']}"
-                    for e in errors[:3]
-                )
-                + where,
-                errors,
-            )
-        if store is None:
-            fields = list(parts[0])
-            outcomes = {k: np.concatenate([parts[c][k] for c in range(n_chunks)]) for k in fields}
-            return Study(
-                scenario, runs, seed, outcomes, compile_s, wall_s, n_dev, chunk, workers=n_workers
-            )
-        study = Study(
-            scenario,
-            runs,
-            seed,
-            None,
-            compile_s,
-            wall_s,
-            n_dev,
-            chunk,
-            store.path,
-            workers=n_workers,
-        )
-        store.finish(study.summary(), scenario.to_toml())
-        return study
-    finally:
-        if store is not None:
-            store.close()
-
-
-class StudyError(RuntimeError):
-    """Chunks of a study raised; ``errors``: ``{"chunk", "runs": [start, stop], "error"}``."""
-
-    def __init__(self, message: str, errors: list):
-        super().__init__(message)
-        self.errors = errors
-
-
-def _recorded_chunk_size(out) -> int | None:
-    import json
-    import pathlib
-
-    from .store import MANIFEST
-
-    try:
-        return int(json.loads((pathlib.Path(out) / MANIFEST).read_text())["chunk_size"])
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
 
 
 def _run_local(scenario, system, seed, todo, chunk, n_devices, max_memory_fraction, finished):

@@ -1,4 +1,4 @@
-"""Operating envelopes: a grid of Monte Carlo studies over scenario fields (issue 15 item 2).
+"""Operating envelopes: a grid of Monte Carlo studies over scenario fields.
 
 ``envelope(scenario, grid, runs)`` runs one vmapped study (:func:`gnc_jax.run_study`) per cell
 of the grid, the product of the values of each ``section.field`` axis, and writes
@@ -29,8 +29,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from .montecarlo import run_study
 from .scenario import Scenario, ScenarioError
+from .study import run_study
 
 SIMULATED, INFEASIBLE, REFUSED = "simulated", "infeasible", "refused"
 

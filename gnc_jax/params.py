@@ -26,7 +26,7 @@ from typing import Any
 import equinox as eqx
 import jax.numpy as jnp
 
-from .scenario.schema import Field
+from .schema import Field
 
 _KEY = "gnc_jax.param"
 

@@ -3,8 +3,8 @@
 import json
 import pathlib
 
-from .montecarlo import run_study
 from .scenario import ScenarioError, list_scenarios
+from .study import run_study
 from .systems.base import get_system
 
 

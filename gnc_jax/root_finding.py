@@ -18,7 +18,7 @@ at a time and absorbs its f: :func:`bounded_regula_falsi` drives it with a fixed
 ``lax.scan`` whose slots are masked once a run's answer is known (a batch of guidance cycles
 then costs the same as its slowest member); a caller with evaluations of variable length can
 drive it with its own loop (see :meth:`SkipEntryGuidance.correct
-<gnc_jax.guidance.skip_entry.SkipEntryGuidance.correct>`).
+<gnc_jax.guidance.entry.skip_entry.SkipEntryGuidance.correct>`).
 ``n_evals_early_exit`` counts the evaluations a sequential early-exit loop would have made,
 which is the paper's "predictions per cycle" (seed 003 Table 3).
 """

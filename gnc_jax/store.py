@@ -1,4 +1,4 @@
-"""Study directories on disk: chunked Parquet results that survive the process (issue 16).
+"""Study directories on disk: chunked Parquet results that survive the process.
 
 A study written with ``out=DIR`` (``gnc-jax run ... --out DIR``) keeps nothing it has finished
 only in memory. The directory holds::
@@ -37,7 +37,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from ._status import Status
-from .scenario import ScenarioError
+from .schema import ScenarioError
 
 MANIFEST = "study.json"
 RUNS_DIR = "runs"
@@ -51,7 +51,7 @@ _STUDY_FILES = ("study.json", "summary.json", "scenario.toml", "runs.parquet")
 def code_version() -> str:
     """The package version and a hash of its source and data files: a resumed study is only
     continued by the code that started it."""
-    from . import __version__
+    from ._version import __version__
 
     root = pathlib.Path(__file__).resolve().parent
     h = hashlib.sha256()

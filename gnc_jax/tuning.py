@@ -1,4 +1,4 @@
-"""Gradient-based tuning of guidance gains (issue 14): ``gj.tune``, ``gnc-jax tune``.
+"""Gradient-based tuning of guidance gains: ``gj.tune``, ``gnc-jax tune``.
 
 The gains to tune are chosen by their scenario names (``guidance.los.k1``, ``guidance.apn.n0``,
 ``guidance.skip_entry.k_range``, ...: :meth:`~gnc_jax.systems.AbstractSystem.tunable_names`).

@@ -1,4 +1,4 @@
-"""The long fuzz campaign (issue #13, item 5), on demand::
+"""The long fuzz campaign, on demand::
 
     python tests/fuzz_campaign.py --per-family 200 --timeout 300 --out fuzz.json
 

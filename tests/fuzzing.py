@@ -1,4 +1,4 @@
-"""Property-based fuzzing of every registered system (issue #13, item 5).
+"""Property-based fuzzing of every registered system.
 
 A *case* is a system's ``example`` scenario with its ``test_overrides``, plus 1-4 fields of its
 schema (the chosen law's ``[guidance.<law>]`` table for guidance sections) set to a value
@@ -28,7 +28,7 @@ import numpy as np
 from hypothesis import strategies as st
 
 import gnc_jax as gj
-from gnc_jax.scenario.schema import Field
+from gnc_jax.schema import Field
 
 RUNS = 2
 """Runs per fuzz study: enough to exercise the batch and the statistics, cheap to run."""

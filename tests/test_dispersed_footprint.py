@@ -1,4 +1,4 @@
-"""Issue 15 acceptance item 1: each Monte Carlo run's own reachable footprint (the pre-check
+"""Each Monte Carlo run's own reachable footprint (the pre-check
 columns ``reachable_fraction`` ...), against independent references."""
 
 import jax
@@ -10,13 +10,18 @@ from scipy.integrate import solve_ivp
 import gnc_jax as gj
 from gnc_jax import operating_envelope as envelope_module
 from gnc_jax.dynamics.entry import EntryState, entry_state_from_conditions
-from gnc_jax.guidance import corridor
-from gnc_jax.guidance import reference_design as rd
-from gnc_jax.guidance.corridor import DT_S, FOOTPRINT_BANKS_DEG, fly_from_state, track_footprint
-from gnc_jax.guidance.entry_common import EntryModel, flight_variables
+from gnc_jax.guidance.entry import corridor
+from gnc_jax.guidance.entry import reference_design as rd
+from gnc_jax.guidance.entry.base import EntryModel, flight_variables
+from gnc_jax.guidance.entry.corridor import (
+    DT_S,
+    FOOTPRINT_BANKS_DEG,
+    fly_from_state,
+    track_footprint,
+)
 from gnc_jax.montecarlo import run_key
-from gnc_jax.simulation import capsule as capsule_sim
-from gnc_jax.systems import capsule as capsule_system
+from gnc_jax.systems.capsule import simulation as capsule_sim
+from gnc_jax.systems.capsule import system as capsule_system
 
 SHORT = ["simulation.max_time_s=2000.0"]  # the horizon of tests/test_envelope.py
 ZERO = [

@@ -1,4 +1,4 @@
-"""The documentation cannot rot (issue 17): the site builds with warnings as errors, and every
+"""The documentation cannot rot: the site builds with warnings as errors, and every
 Python block of every page runs.
 
 A page's ```python blocks run in order in one namespace, each page in a fresh interpreter in a

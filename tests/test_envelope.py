@@ -1,4 +1,4 @@
-"""Issue 15 item 2: ``gnc-jax envelope`` and its capsule pre-check."""
+"""``gnc-jax envelope`` and its capsule pre-check."""
 
 import jax
 import jax.numpy as jnp
@@ -11,10 +11,10 @@ import gnc_jax as gj
 from gnc_jax import cli
 from gnc_jax import operating_envelope as envelope_module
 from gnc_jax.dynamics.entry import EntryState, entry_state_from_conditions
-from gnc_jax.guidance.corridor import DT_S, fly_constant_bank
-from gnc_jax.guidance.entry_common import flight_variables
-from gnc_jax.systems.capsule import entry_envelope
-from gnc_jax.systems.impactor import ImpactorSystem
+from gnc_jax.guidance.entry.base import flight_variables
+from gnc_jax.guidance.entry.corridor import DT_S, fly_constant_bank
+from gnc_jax.systems.capsule.system import entry_envelope
+from gnc_jax.systems.impactor.system import ImpactorSystem
 
 
 def test_grid_specs_parse_and_bad_ones_name_the_axis():
@@ -97,7 +97,7 @@ def test_constant_bank_flight_matches_scipy():
     )
     assert bool(f.landed) and sol.t_events[0].size == 1
     t_c = sol.t_events[0][0]
-    from gnc_jax.guidance.entry_common import ground_range_m
+    from gnc_jax.guidance.entry.base import ground_range_m
 
     ref_range = float(ground_range_m(y0.r, 0.0, sol.y_events[0][0][:3], t_c, earth))
     assert abs(float(f.range_m) - ref_range) < 2e3

@@ -13,7 +13,7 @@ import numpy as np
 from gnc_jax._numerics import computed_once, matmul
 from gnc_jax.dynamics.impactor import tilt_direction
 from gnc_jax.navigation.ekf import NavEstimate, los_model, predict_los, predict_measurement
-from gnc_jax.simulation.impactor import _accel_noise
+from gnc_jax.systems.impactor.simulation import _accel_noise
 
 
 def test_computed_once_is_the_function_with_its_derivatives():

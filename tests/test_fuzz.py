@@ -1,4 +1,4 @@
-"""Short fuzz campaign (issue #13, item 5), run in CI: every registered system, scenarios
+"""Short fuzz campaign, run in CI: every registered system, scenarios
 drawn from its declared field ranges and from just outside them (``tests/fuzzing.py``).
 
 Each case runs in a worker process (``tests/fuzz_campaign.py``) with a time limit, so a hang

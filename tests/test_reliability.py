@@ -1,4 +1,4 @@
-"""Issue #13: every input is refused in one line or run to an honest outcome.
+"""Every input is refused in one line or run to an honest outcome.
 
 Each case found by trying the package as a new user would (hostile or unusual input to
 ``run``, ``reproduce`` and ``report``) is a regression test here: the refusal names the field,
@@ -17,6 +17,7 @@ import pytest
 
 import gnc_jax as gj
 from gnc_jax import cli, montecarlo
+from gnc_jax import study as study_module
 from gnc_jax.scenario import ScenarioError
 
 TOY = pathlib.Path(__file__).with_name("toy.toml")
@@ -190,7 +191,7 @@ def test_a_chunk_too_large_for_memory_is_refused_before_it_runs(monkeypatch):
 
 @pytest.mark.slow
 def test_ten_million_runs_in_one_chunk_are_refused_before_they_run(paper_scale):
-    # The case of the issue: `--chunk-size 10000000` tried to allocate 12 GB. Compiling it
+    # `--chunk-size 10000000` tried to allocate 12 GB. Compiling it
     # takes ~8 s; the refusal comes from the compiled program's own memory figures.
     scenario = gj.load_scenario("deep-impact-los")
     runs = 10_000_000 if paper_scale else 2_000_000
@@ -254,6 +255,7 @@ def test_exit_code_follows_the_failed_fraction(tmp_path, capsys, monkeypatch):
             return out._replace(miss_m=jnp.where(bad, jnp.nan, out.miss_m)), trace
 
     monkeypatch.setattr(montecarlo, "get_system", lambda kind: HalfNaN())
+    monkeypatch.setattr(study_module, "get_system", lambda kind: HalfNaN())
     argv = ["run", str(TOY), "--runs", "20", "--no-progress", "--out", str(tmp_path / "a")]
     assert cli.main(argv) == cli.EXIT_FAILED_RUNS
     err = capsys.readouterr().err
@@ -325,7 +327,7 @@ def test_an_internal_error_is_one_line_with_a_way_to_the_traceback(capsys, monke
     def broken(*args, **kwargs):
         raise RuntimeError("boom\nsecond line")
 
-    monkeypatch.setattr(montecarlo, "run_study", broken)
+    monkeypatch.setattr(study_module, "run_study", broken)
     monkeypatch.delenv(cli.DEBUG_ENV, raising=False)
     assert cli.main(["run", "deep-impact-los", "--runs", "2"]) == cli.EXIT_INTERNAL
     err = capsys.readouterr().err.strip()

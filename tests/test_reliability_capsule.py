@@ -1,4 +1,4 @@
-"""Reliability of the capsule system (issue #13): inputs the models cannot handle are refused in
+"""Reliability of the capsule system: inputs the models cannot handle are refused in
 one line before the reference design, and degraded runs are statuses, never ``ok``."""
 
 import math
@@ -11,9 +11,9 @@ import pytest
 import gnc_jax as gj
 from gnc_jax._status import Status
 from gnc_jax.dynamics.entry import entry_state_from_conditions
-from gnc_jax.guidance import reference_design as rd
-from gnc_jax.guidance.entry_common import EntryModel
-from gnc_jax.simulation import capsule as capsule_sim
+from gnc_jax.guidance.entry import reference_design as rd
+from gnc_jax.guidance.entry.base import EntryModel
+from gnc_jax.systems.capsule import simulation as capsule_sim
 
 
 @pytest.fixture(scope="module")

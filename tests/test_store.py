@@ -1,4 +1,4 @@
-"""Study directories (issue 16): chunks on disk, resume, directory rules, interruption, Dask.
+"""Study directories: chunks on disk, resume, directory rules, interruption, Dask.
 
 The study is the toy system of tests/toy_system.py (registered from outside the package, as
 a user's), small enough that the subprocess and cluster tests spend their time on what they
@@ -20,8 +20,8 @@ import pytest
 
 import gnc_jax as gj
 from gnc_jax import store
-from gnc_jax.montecarlo import run_study
 from gnc_jax.scenario import ScenarioError
+from gnc_jax.study import run_study
 
 TESTS = pathlib.Path(__file__).resolve().parent
 TOY = TESTS / "toy.toml"
@@ -247,6 +247,7 @@ def test_dask_cluster_equals_local_and_survives_a_lost_worker(toy, reference, cl
 def test_a_chunk_that_raises_is_reported_and_the_rest_go_on(toy, reference, tmp_path, monkeypatch):
     distributed = pytest.importorskip("dask.distributed")
     from gnc_jax import montecarlo
+    from gnc_jax import study as study_module
 
     run_chunk = montecarlo.run_chunk
 
@@ -258,7 +259,7 @@ def test_a_chunk_that_raises_is_reported_and_the_rest_go_on(toy, reference, tmp_
     monkeypatch.setattr(montecarlo, "run_chunk", faulty)
     out = tmp_path / "study"
     with distributed.Client(processes=False, n_workers=1, threads_per_worker=1) as client:
-        with pytest.raises(montecarlo.StudyError, match=r"chunk 2 \(runs 80\.\.119\)") as e:
+        with pytest.raises(study_module.StudyError, match=r"chunk 2 \(runs 80\.\.119\)") as e:
             run_study(toy, runs=RUNS, chunk_size=CHUNK, progress=False, client=client, out=out)
     assert e.value.errors == [dict(chunk=2, runs=[80, 120], error="FloatingPointError: injected")]
     names = [f.name for f in store.chunk_files(out)]

@@ -23,9 +23,9 @@ import numpy as np
 import gnc_jax as gj
 from gnc_jax.guidance.base import AbstractGuidanceLaw, register_law
 from gnc_jax.params import param
-from gnc_jax.scenario.schema import Field, ScenarioError
-from gnc_jax.simulation.base import with_status
+from gnc_jax.schema import Field, ScenarioError
 from gnc_jax.systems import AbstractSystem, register_system
+from gnc_jax.systems.loop import with_status
 
 
 class ToyParams(eqx.Module):
@@ -194,7 +194,7 @@ class ToySystem(AbstractSystem):
             dv_mean_mps=float(np.mean(outcomes["dv_mps"][ok])),
         )
 
-    def figures(self, summary, runs, scenario, out):
+    def figures(self, summary, runs, scenario, out, traces=None):
         from gnc_jax.plotting import pyplot
 
         plt = pyplot()

@@ -2,24 +2,24 @@
 
     python benchmarks/peers/numba_impactor.py [--quick] [--sizes 2000 10000] [--repeats 3]
 
-A scalar transcription of `gnc_jax.simulation.impactor.simulate` with the LOS switching-curve
-law, as an expert numba user would write it: ``@njit(parallel=True)`` with ``prange`` over runs,
-scalar code inside (vectors as three floats, the 6x6 covariance in one array per run), nothing
-allocated per step, and branches where the work is conditional (the engine fires in about 0.5 %
-of the control steps). Same truth (RK4 of the target's point-mass gravity + solar tide, thrust
-and mass flow held over the step), same camera and Gaussian LOS front end, same EKF (closed-form
-LOS Jacobian, the two angles' scalar updates written out, straight-line covariance growth,
-attitude-error rotations from power series), same law (error
-ellipse at each image, switching curves of k1 and k2 sigma_B with the one-step floor, Schmitt
-trigger, zero-effort-miss thrust direction), same error sources and the same outcome (coast to
-the B-plane, miss, Δv, firings, fuel, status ``propellant``). Every number comes from
-``gj.build(scenario)``; nothing is copied by hand.
+A scalar transcription of `gnc_jax.systems.impactor.simulation.simulate` with the LOS
+switching-curve law, as an expert numba user would write it: ``@njit(parallel=True)`` with
+``prange`` over runs, scalar code inside (vectors as three floats, the 6x6 covariance in one array
+per run), nothing allocated per step, and branches where the work is conditional (the engine fires
+in about 0.5 % of the control steps). Same truth (RK4 of the target's point-mass gravity + solar
+tide, thrust and mass flow held over the step), same camera and Gaussian LOS front end, same EKF
+(closed-form LOS Jacobian, the two angles' scalar updates written out, straight-line covariance
+growth, attitude-error rotations from power series), same law (error ellipse at each image,
+switching curves of k1 and k2 sigma_B with the one-step floor, Schmitt trigger, zero-effort-miss
+thrust direction), same error sources and the same outcome (coast to the B-plane, miss, Δv, firings,
+fuel, status ``propellant``). Every number comes from ``gj.build(scenario)``; nothing is copied by
+hand.
 
 Two ways to feed it random numbers:
 
-* **fed**: the standard normals gnc_jax draws, `gnc_jax.simulation.impactor.run_draws` of each
-  run's key, stacked over runs: the outcomes equal gnc_jax's run for run
-  (``tests/test_peer_numba.py``);
+* **fed**: the standard normals gnc_jax draws,
+  `gnc_jax.systems.impactor.simulation.run_draws` of each run's key, stacked over runs: the
+  outcomes equal gnc_jax's run for run (``tests/test_peer_numba.py``);
 * **own**: the kernel draws its own normals with numba's ``np.random.standard_normal``
   (per-thread Mersenne twister, seeded ``seed + i`` for run ``i``), only what is used: 15 per run
   (delivery, knowledge, attitude and accelerometer biases), 8 per image (image processing,
@@ -53,7 +53,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import gnc_jax as gj  # first: float64 and one XLA device per core
-import gnc_jax.simulation.impactor as _layout
+from gnc_jax.systems.impactor import simulation as _layout
 
 try:
     import numba
@@ -124,7 +124,7 @@ def problem(scenario):
     """``(prm, c_bi, p0, n_images, steps_per_image, coast_steps)`` of an impactor scenario with
     the LOS law and the Gaussian LOS front end, from ``gj.build``; ``p0`` is the filter's
     initial covariance (the same for every run: it depends on the nominal state only)."""
-    from gnc_jax.guidance.los import LOSSwitchingCurveGuidance
+    from gnc_jax.guidance.impactor.los import LOSSwitchingCurveGuidance
     from gnc_jax.navigation.measurements.gaussian import GaussianLOSMeasurement
 
     sim, law = gj.build(scenario)
@@ -706,7 +706,7 @@ def simulate_own(prm, c_bi, p0, n_images, steps, coast_steps, seed, do_images, d
 
 @functools.cache
 def _draws_function():
-    from gnc_jax.simulation.impactor import run_draws
+    from gnc_jax.systems.impactor.simulation import run_draws
 
     def draws(sim, seed, idx):
         return jax.vmap(lambda i: run_draws(sim, gj.run_key(seed, i)))(idx)

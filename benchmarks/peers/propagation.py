@@ -142,7 +142,7 @@ class EntryEnsemble(NamedTuple):
 
 def entry_ensemble(n: int, seed: int = 0, model: str = "exponential") -> EntryEnsemble:
     """``n`` arcs from the ``lunar-skip-entry`` entry interface (run keys ``seed``, 0..n-1)."""
-    from gnc_jax.simulation import capsule
+    from gnc_jax.systems.capsule import simulation as capsule
 
     sim = capsule.build(gj.load_scenario("lunar-skip-entry"))
     air = sim.atmosphere
@@ -330,8 +330,8 @@ def cruise_ensemble(n: int, seed: int = 0) -> CruiseEnsemble:
     """``n`` dispersed states at the ``phoenix-midcourse`` first fix, propagated to E-10 d."""
     from gnc_jax.geometry.kepler import propagate_kepler
     from gnc_jax.geometry.lambert import solve_lambert
-    from gnc_jax.scenario.midcourse import epochs_s
-    from gnc_jax.simulation import midcourse
+    from gnc_jax.systems.midcourse import simulation as midcourse
+    from gnc_jax.systems.midcourse.schema import epochs_s
 
     scenario = gj.load_scenario("phoenix-midcourse")
     sim = midcourse._simulation(scenario.config)  # model and epochs, no nominal design

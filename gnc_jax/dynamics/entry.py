@@ -482,8 +482,8 @@ class BankActuator(eqx.Module):
       lift-up (the straight path in sigma), a roll under way keeping its way round when the
       command changes.
     - ``"lift_down_pairs"``: the straight path in sigma (through lift-up), except between two
-      lift-down banks, through lift-down; a roll under way keeps its way round (the default
-      up to session 12).
+      lift-down banks, through lift-down; a roll under way keeps its way round (kept for
+      comparison).
     - ``"through_lift_up"``: always the straight path.
 
     Measured: rolling a lift-down reversal through lift-up lofts a capsule entering shallow

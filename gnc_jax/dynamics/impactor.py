@@ -109,6 +109,14 @@ class Engine(eqx.Module):
         return throttle * self.thrust_n / (self.isp_s * G0)
 
 
+def straight_line_time_to_b_plane(position, velocity) -> float:
+    """Time (s) for the straight-line approach from ``position`` at constant ``velocity`` (any
+    consistent units, e.g. km and km/s) to reach the B-plane: ``-(r . v) / |v|^2``. Plain
+    Python floats: scenario checks and shapes use it before anything is traced."""
+    vv = sum(x * x for x in velocity)
+    return -sum(a * b for a, b in zip(position, velocity)) / vv
+
+
 def vector_field(t, y: ImpactorState, args) -> ImpactorState:
     """d/dt (r, v, m) with the thrust vector (N) and mass flow (kg/s) held over the step.
 

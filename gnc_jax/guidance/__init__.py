@@ -4,13 +4,19 @@ Importing a law's module registers it in its family (``@register_law``); the imp
 the registrations of the built-in laws.
 """
 
-from .apn import APNState, AugmentedPNGuidance, PNGuidanceContext, PNNavigation
-from .base import AbstractImpactorGuidance, EngineCommand, ImpactorGuidanceContext
-from .los import LOSGuidanceState, LOSSwitchingCurveGuidance, switching_curve
-from .pn import ProportionalNavigationGuidance as ProportionalNavigationGuidance
-from .predictive import PredictiveGuidance, PredictiveGuidanceState
-from .skip_entry import SkipEntryGuidance, SkipEntryState
-from .targeting import AutonomousCorrection, NewtonTargeter, TargetingResult, solve_linear_targeting
+from .base import EngineCommand
+from .entry.skip_entry import SkipEntryGuidance, SkipEntryState
+from .impactor.base import AbstractImpactorGuidance, ImpactorGuidanceContext
+from .impactor.los import LOSGuidanceState, LOSSwitchingCurveGuidance, switching_curve
+from .impactor.pn import ProportionalNavigationGuidance as ProportionalNavigationGuidance
+from .impactor.predictive import PredictiveGuidance, PredictiveGuidanceState
+from .intercept.apn import APNState, AugmentedPNGuidance, PNGuidanceContext, PNNavigation
+from .midcourse.targeting import (
+    AutonomousCorrection,
+    NewtonTargeter,
+    TargetingResult,
+    solve_linear_targeting,
+)
 
 __all__ = [
     "APNState",

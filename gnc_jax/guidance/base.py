@@ -28,48 +28,13 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from .._numerics import safe_unit  # noqa: F401  (re-exported for the laws)
-from .._types import Array, Float, Matrix3, Scalar, Vector3
-from ..dynamics.impactor import Engine, RelativeDynamics
-from ..geometry.bplane import b_plane_point_to_inertial
+from .._types import Scalar, Vector3
 from ..params import from_config
 
 
 class EngineCommand(NamedTuple):
     throttle: Scalar  # fraction of the control step the engine fires, in [0, 1]
     direction: Vector3  # commanded thrust direction, unit vector, inertial
-
-
-class ImpactorGuidanceContext(eqx.Module):
-    """Mission data known on board: B-plane frame, aim points, engine, timing.
-
-    Attributes:
-        c_bi: B-plane frame rows (S, T, R), inertial.
-        aim_initial_m: aim point (B_T, B_R) before the retarget time, m.
-        aim_final_m: aim point after it (seed 000 Table 2: (1, 3) km), m.
-        retarget_time_s: mission time at which the aim point changes (t_go = 750 s nominal).
-        cutoff_time_s: no burn is commanded from this mission time on.
-        engine, mass_kg: nominal engine and initial mass used by the laws.
-        dynamics: the on-board model of the differential gravity (predictors).
-        dt_s: control step; image_interval_s: navigation image interval.
-    """
-
-    c_bi: Matrix3
-    aim_initial_m: Float[Array, "2"]
-    aim_final_m: Float[Array, "2"]
-    retarget_time_s: Scalar
-    cutoff_time_s: Scalar
-    engine: Engine
-    mass_kg: Scalar
-    dynamics: RelativeDynamics
-    dt_s: float = eqx.field(static=True)
-    image_interval_s: float = eqx.field(static=True)
-
-    def aim_b_plane(self, t) -> Float[Array, "2"]:
-        return jnp.where(t >= self.retarget_time_s, self.aim_final_m, self.aim_initial_m)
-
-    def aim_point(self, t) -> Vector3:
-        """Inertial position of the current aim point (relative to the target), m."""
-        return b_plane_point_to_inertial(self.aim_b_plane(t), self.c_bi)
 
 
 class AbstractGuidanceLaw(eqx.Module):
@@ -143,21 +108,3 @@ def register_law(name: str):
         return cls
 
     return decorate
-
-
-class AbstractImpactorGuidance(AbstractGuidanceLaw):
-    """Family base of the impactor terminal-guidance laws: ``nav`` is the filter's
-    :class:`~gnc_jax.navigation.ekf.NavEstimate`, ``ctx`` an :class:`ImpactorGuidanceContext`,
-    ``plan`` runs after each image's filter update, ``step`` returns an
-    :class:`EngineCommand`."""
-
-    laws: ClassVar[dict[str, type]] = {}
-
-
-class AbstractInterceptGuidance(AbstractGuidanceLaw):
-    """Family base of the deep-space intercept laws (seed 004): ``nav`` is a
-    :class:`~gnc_jax.guidance.apn.PNNavigation`, ``ctx`` a
-    :class:`~gnc_jax.guidance.apn.PNGuidanceContext`, ``step`` returns an
-    :class:`EngineCommand` whose throttle is the pulse fraction of the step."""
-
-    laws: ClassVar[dict[str, type]] = {}

@@ -1,7 +1,7 @@
 """Scenarios: packaged TOML files and user files, validated before anything is compiled."""
 
+from ..schema import Field, ScenarioError
 from .loader import Scenario, list_scenarios, load_scenario, packaged_names
-from .schema import Field, ScenarioError
 
 __all__ = [
     "Field",

@@ -9,8 +9,8 @@ from typing import Any
 
 import tomli_w
 
+from ..schema import ScenarioError, parse_override
 from ..systems.base import get_system
-from .schema import ScenarioError, parse_override
 
 _META_FIELDS = {"name", "kind", "description", "reference", "runs", "seed"}
 MAX_RUNS = 10**9

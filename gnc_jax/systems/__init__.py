@@ -1,10 +1,19 @@
-"""Systems: one registered contract per kind of scenario (``systems/base.py``), one file each
-(``impactor``, ``capsule``, ``midcourse``, ``intercept``).
+"""Systems: one registered contract per kind of scenario (``systems/base.py``), one subpackage
+each under the scenario kind's name (``impactor``, ``capsule``, ``midcourse``, ``intercept``),
+holding the system's scenario schema, its single-run simulation and its contract.
 
-The built-in systems register themselves the first time the registry is asked
-(:func:`get_system`, :func:`systems`); :func:`register_system` adds a user's.
+Importing this package registers the built-in systems; :func:`register_system` adds a user's
+(from their code, ``GNC_JAX_PLUGINS`` or a ``gnc_jax.plugins`` entry point).
 """
 
-from .base import AbstractSystem, get_system, register_system, systems, tunable_leaf
+from . import capsule, impactor, intercept, midcourse  # noqa: E402, F401, I001  (registrations)
+from .base import AbstractSystem, TraceRequest, get_system, register_system, systems, tunable_leaf
 
-__all__ = ["AbstractSystem", "get_system", "register_system", "systems", "tunable_leaf"]
+__all__ = [
+    "AbstractSystem",
+    "TraceRequest",
+    "get_system",
+    "register_system",
+    "systems",
+    "tunable_leaf",
+]

@@ -10,7 +10,8 @@ adds) is everything gnc_jax needs to run a scenario of that kind:
 * ``simulate(params, law, key, record=False) -> (outcome, trace)``: one run, pure and jit-able;
   ``outcome`` a NamedTuple whose first field is ``status``;
 * ``statistics(outcomes, ok)``: its summary statistics over the ``ok`` runs;
-* ``figures(summary, runs, scenario, out)``: its report figures;
+* ``figure_traces(summary, runs, scenario)`` and ``figures(summary, runs, scenario, out,
+  traces)``: the runs its report figures draw (simulated by the report layer) and the figures;
 * ``paper_labels``: how the published metrics read in ``gnc-jax reproduce``;
 * ``tunable`` and ``metrics``: the scenario names of its tunable leaves and the summary keys
   that tuning objectives and envelope maps read;
@@ -26,13 +27,32 @@ import abc
 import importlib
 import importlib.metadata
 import os
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 from ..params import declared_params, file_name, schema_of
-from ..scenario.schema import Field, ScenarioError, Schema, validate
+from ..schema import Field, ScenarioError, Schema, validate
 
 _REGISTRY: dict[str, "AbstractSystem"] = {}
 _RENAMED = {"pn": "intercept"}  # kinds of earlier versions, named in the error
+
+
+class TraceRequest(NamedTuple):
+    """Runs that a system's figures draw, simulated by the report layer and handed to
+    :meth:`AbstractSystem.figures` (the figures never run the Monte Carlo themselves).
+
+    Attributes:
+        indices: run indices of the study (the study's keys, :func:`gnc_jax.run_key`).
+        overrides: scenario overrides for these runs (e.g. an error-free case); ``None``: none.
+        seed: root seed; ``None``: the study's.
+        every: keep every ``every``-th sample of the traces along time.
+        single: run by the per-run program (one run, ``indices[0]``) instead of the vmapped one.
+    """
+
+    indices: tuple[int, ...]
+    overrides: dict | None = None
+    seed: int | None = None
+    every: int = 1
+    single: bool = False
 
 
 class AbstractSystem(abc.ABC):
@@ -213,8 +233,15 @@ class AbstractSystem(abc.ABC):
         when the system has none."""
         return None
 
-    def figures(self, summary: dict, runs: dict, scenario, out) -> list:
-        """Write the report figures into the directory ``out``; return their paths."""
+    def figure_traces(self, summary: dict, runs: dict, scenario) -> dict[str, TraceRequest]:
+        """The runs the figures draw, by name; the report layer simulates them and passes
+        ``{name: (outcomes, traces)}`` to :meth:`figures`. Default: none."""
+        return {}
+
+    def figures(self, summary: dict, runs: dict, scenario, out, traces=None) -> list:
+        """Write the report figures into the directory ``out``; return their paths.
+        ``traces``: ``{name: (outcomes, traces)}`` of :meth:`figure_traces`, dicts of numpy
+        arrays (run on the first axis unless the request was ``single``)."""
         return []
 
     def __repr__(self) -> str:
@@ -254,15 +281,13 @@ instead declare entry points in the group ``gnc_jax.plugins``."""
 _loaded = False
 
 
-def _load_builtin() -> None:
+def _load_plugins() -> None:
+    """Import the user's plugins once (the built-in systems register when ``gnc_jax.systems``
+    is imported)."""
     global _loaded
     if _loaded:
         return
     _loaded = True
-    # The built-in systems register themselves when their modules are imported; imported here,
-    # on first use, because they import the scenario package that imports this module.
-    from . import capsule, impactor, intercept, midcourse  # noqa: F401
-
     for entry in importlib.metadata.entry_points(group="gnc_jax.plugins"):
         entry.load()
     for name in filter(None, os.environ.get(PLUGINS_ENV, "").split(",")):
@@ -277,7 +302,7 @@ def _load_builtin() -> None:
 
 def get_system(name: str) -> AbstractSystem:
     """The registered system of scenario kind ``name``."""
-    _load_builtin()
+    _load_plugins()
     if name not in _REGISTRY:
         renamed = f" (renamed {_RENAMED[name]!r})" if name in _RENAMED else ""
         raise ScenarioError(
@@ -288,7 +313,7 @@ def get_system(name: str) -> AbstractSystem:
 
 def systems() -> dict[str, AbstractSystem]:
     """Every registered system by name."""
-    _load_builtin()
+    _load_plugins()
     return dict(_REGISTRY)
 
 

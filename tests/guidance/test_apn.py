@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from gnc_jax.dynamics.intercept import MU_SUN, InterceptDynamics
-from gnc_jax.guidance.apn import (
+from gnc_jax.guidance.intercept.apn import (
     APNState,
     AugmentedPNGuidance,
     PNGuidanceContext,

@@ -1,4 +1,4 @@
-"""Issue 15 item 4: predictive burn schedules given as times to go scale with the approach;
+"""Predictive burn schedules given as times to go scale with the approach;
 a schedule outside the guided arc is refused before compilation, an implausibly early last
 burn is warned about on the command line and in summary.json."""
 
@@ -9,6 +9,7 @@ import pytest
 
 import gnc_jax as gj
 from gnc_jax import cli, montecarlo
+from gnc_jax import study as study_module
 
 TGO = "guidance.predictive.burn_tgo_s=[6000.0, 3100.0, 750.0, 420.0]"
 
@@ -66,7 +67,7 @@ def test_an_early_last_burn_is_warned_and_recorded(capsys):
     err = capsys.readouterr().err
     assert err.startswith("gnc-jax: warning: guidance.predictive.burn_tgo_s: the last burn is at")
     assert "300 s, 600 s before impact" in err and len(err.splitlines()) == 1
-    study = montecarlo.Study(sc, 1, 0, {"status": np.array([gj.Status.nan])}, 0.0, 1.0, 1, 1)
+    study = study_module.Study(sc, 1, 0, {"status": np.array([gj.Status.nan])}, 0.0, 1.0, 1, 1)
     summary = json.loads(json.dumps(study.summary()))
     assert len(summary["warnings"]) == 1 and "first half" in summary["warnings"][0]
     # the packaged schedule (last burn 420 s before a 7200 s impact) is not warned about
@@ -74,7 +75,7 @@ def test_an_early_last_burn_is_warned_and_recorded(capsys):
     assert system.warnings(gj.load_scenario("deep-impact-predictive").config) == []
     assert (
         "warnings"
-        not in montecarlo.Study(
+        not in study_module.Study(
             gj.load_scenario("deep-impact-predictive"), 1, 0, study.outcomes, 0.0, 1.0, 1, 1
         ).summary()
     )

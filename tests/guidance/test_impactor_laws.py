@@ -20,7 +20,7 @@ from gnc_jax.guidance import (
     PredictiveGuidance,
     switching_curve,
 )
-from gnc_jax.guidance.los import miss_limits
+from gnc_jax.guidance.impactor.los import miss_limits
 from gnc_jax.navigation import NavEstimate
 
 
@@ -216,7 +216,7 @@ def test_square_root_free_switch_decides_as_the_switching_curves():
     """The hard LOS switch (multiplied-out squares) against schmitt_trigger on the rates of
     eq. 20, over random geometries: closing and opening ranges, ranges inside the tolerance,
     both previous states, and sigma_B small enough for the one-step resolution to bind."""
-    from gnc_jax.guidance.los import _hard_switch
+    from gnc_jax.guidance.impactor.los import _hard_switch
     from gnc_jax.guidance.trigger import schmitt_trigger
 
     ctx = context()

@@ -11,15 +11,15 @@ import pytest
 import gnc_jax as gj
 from gnc_jax.dynamics.entry import EntryConditions, entry_state_from_conditions
 from gnc_jax.guidance.base import family_of
-from gnc_jax.guidance.entry_common import (
+from gnc_jax.guidance.entry.base import (
     AbstractEntryGuidance,
     EntryNav,
     FlightVariables,
     drag_and_lift,
     flight_variables,
 )
-from gnc_jax.guidance.skip_entry import SkipEntryGuidance
-from gnc_jax.simulation.capsule import guidance_context
+from gnc_jax.guidance.entry.skip_entry import SkipEntryGuidance
+from gnc_jax.systems.capsule.simulation import guidance_context
 
 
 @pytest.fixture(scope="module")
@@ -147,7 +147,7 @@ def test_predictor_coast_step_costs_less_accuracy_than_the_corrector_tolerance(l
     import dataclasses
 
     from gnc_jax.dynamics.entry import EntryState
-    from gnc_jax.guidance.entry_common import EntryModel
+    from gnc_jax.guidance.entry.base import EntryModel
 
     sim, law, ctx = law_and_ctx
     assert law.predictor_coast_dt_s > law.predictor_dt_s
@@ -215,7 +215,7 @@ def _corrector_cycles(law_and_ctx, every=4):
     """States of the corrector cycles of a flight (every ``every``-th), as batched inputs
     of the predictor: (y, t, pulled up, sigma_0 of the cycle, model)."""
     from gnc_jax.dynamics.entry import EntryState
-    from gnc_jax.guidance.entry_common import EntryModel
+    from gnc_jax.guidance.entry.base import EntryModel
 
     _, _, ctx = law_and_ctx
     _, tr = gj.simulate_one(gj.load_scenario("lunar-skip-entry"), index=0, seed=0)
@@ -455,7 +455,7 @@ def test_a_predicted_dive_ends_short_instead_of_diverging(law_and_ctx):
     lift down before flying it into the ground at 52 g). The guard ends it as a dive (kind 4),
     finite and short of the target like the same prediction at 1 s steps (which lands)."""
     from gnc_jax.dynamics.entry import EntryState
-    from gnc_jax.guidance.entry_common import EntryModel
+    from gnc_jax.guidance.entry.base import EntryModel
 
     _, law, ctx = law_and_ctx
     c = ctx.model

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import gnc_jax as gj
-from gnc_jax.guidance.targeting import (
+from gnc_jax.guidance.midcourse.targeting import (
     SENSITIVITIES,
     SENSITIVITY_METHODS,
     AbstractMidcourseGuidance,
@@ -21,7 +21,7 @@ from gnc_jax.guidance.targeting import (
     STMSensitivity,
     solve_linear_targeting,
 )
-from gnc_jax.simulation import midcourse
+from gnc_jax.systems.midcourse import simulation as midcourse
 
 
 @pytest.mark.parametrize("n,m", [(3, 3), (3, 2), (2, 3), (1, 3)])

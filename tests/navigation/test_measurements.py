@@ -23,7 +23,7 @@ from gnc_jax.navigation import (
     register_measurement,
     update_los,
 )
-from gnc_jax.scenario.impactor import SCHEMA
+from gnc_jax.systems.impactor.schema import SCHEMA
 
 ALL_MEASUREMENTS = sorted(AbstractMeasurement.measurements)
 

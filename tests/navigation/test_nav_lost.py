@@ -1,4 +1,4 @@
-"""Issue 15 item 3: a run whose navigation is lost ends ``nav_lost``, counted in ``failed``."""
+"""A run whose navigation is lost ends ``nav_lost``, counted in ``failed``."""
 
 import jax.numpy as jnp
 import numpy as np
@@ -10,7 +10,7 @@ from gnc_jax.navigation.ekf import (
     navigation_lost,
     normalised_innovation_squared,
 )
-from gnc_jax.systems.impactor import ImpactorSystem
+from gnc_jax.systems.impactor.system import ImpactorSystem
 
 
 def test_nis_and_its_bound():

@@ -157,8 +157,8 @@ def test_centroid_noise_against_the_noise_front_end():
 
     At the start of the approach (73 440 km: the 3-sigma pointing uncertainty of ~150 urad
     forces bin 8) the image front end's sigma is below 10 urad (within a factor 2 of it at
-    the resolved-disc exposure; 4.6 urad since the exposure is set on the brightest pixel,
-    issue 15, which lengthens it for the one-pixel disc), in the last frames (612 km, bin 128)
+    the resolved-disc exposure; 4.6 urad with the exposure set on the brightest pixel,
+    which lengthens it for the one-pixel disc), in the last frames (612 km, bin 128)
     within a factor 2 of 10 urad. In between, the resolved, bright (20 000 e- per lit pixel) disc is
     centroided to ~0.005 binned px: 0.1-3 urad, far better than 10 urad (a finding: the noise
     model's 10 urad is conservative for a Lambertian sphere and must stand for shape and albedo
@@ -258,7 +258,7 @@ def test_phase_correction_removes_the_brightness_offset():
 
 @pytest.mark.slow
 def test_autonav_predictive_acceptance(paper_scale):
-    """Issue 5: 300-run image-navigation study (CI: 100 runs), max miss <= 300 m (paper: < 200
+    """Seed 002: 300-run image-navigation study (CI: 100 runs), max miss <= 300 m (paper: < 200
     m), mean total Δv 4-12 m/s (paper: 7.6 m/s in its one hardware-in-the-loop run)."""
     runs = 300 if paper_scale else 100
     s = gj.run_study(gj.load_scenario("autonav-predictive"), runs=runs, seed=0).summary()
@@ -269,7 +269,7 @@ def test_autonav_predictive_acceptance(paper_scale):
     assert s["images_rejected_max"] <= 5
 
 
-# ---- issue 15 item 3: point-like to resolved targets -----------------------------------------
+# ---- point-like to resolved targets --------------------------------------------------------
 
 NARROW = CameraModel(pixel_pitch_m=10.515e-6)  # f = 2.103 m: 5 urad per native pixel
 
@@ -323,7 +323,7 @@ def test_centroid_error_from_point_like_to_resolved(
 
 
 def test_a_point_like_target_is_lost_without_exposure_on_its_peak():
-    """The regression of issue 15: at the resolved-disc exposure (max_exposure_gain = 1) the
+    """At the resolved-disc exposure (max_exposure_gain = 1) the
     300 m body at 150,000 km holds about ten electrons, below the read noise: nothing is found."""
     cam = CameraModel(pixel_pitch_m=10.515e-6, max_exposure_gain=1.0)
     tgt = sphere(0.0, axes=(150.0,) * 3)

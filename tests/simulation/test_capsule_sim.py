@@ -15,7 +15,7 @@ from gnc_jax.dynamics.entry import (
     entry_state_from_conditions,
     entry_vector_field,
 )
-from gnc_jax.guidance.entry_common import flight_variables, hermite_crossing, hermite_state
+from gnc_jax.guidance.entry.base import flight_variables, hermite_crossing, hermite_state
 from gnc_jax.integrate import rk4_step
 
 
@@ -84,7 +84,7 @@ def test_flight_stopped_when_down_equals_the_full_length_scan(capsule_scenario):
     """Without a trace the guidance cycles stop once the flight is down (a while_loop); with
     one they run the whole max_time_s (a scan). A finished flight is frozen, so both give the
     same outcome, the scan being an independent loop structure."""
-    from gnc_jax.simulation.capsule import simulate
+    from gnc_jax.systems.capsule.simulation import simulate
 
     sim, law = gj.build(capsule_scenario)
     for i in range(2):
@@ -119,7 +119,7 @@ def test_downrange_gradient_wrt_tracking_gains_matches_finite_differences(
         pytest.skip("paper scale only (--paper-scale); in CI the family gradient test covers it")
     import equinox as eqx
 
-    from gnc_jax.simulation.capsule import simulate
+    from gnc_jax.systems.capsule.simulation import simulate
 
     sim, law = gj.build(capsule_scenario)
     names = ("k_range", "k_drag_load", "k_hdot", "k_range_rate")
@@ -168,7 +168,7 @@ def test_capsule_report_writes_the_paper_figures(capsule_scenario, tmp_path):
 
 @pytest.mark.slow
 def test_paper_scale_skip_entry(capsule_scenario, paper_scale):
-    """Issue 3 acceptance: every run ok, chute 3σ (mean ± 3 std) inside ±2.5 km downrange and
+    """Seed 003: every run ok, chute 3σ (mean ± 3 std) inside ±2.5 km downrange and
     crossrange, switch speed and altitude within 10 % of the paper's 7350 m/s and 78.66 km.
 
     1000 runs with --paper-scale; 100 in CI (a 3σ interval of 100 runs is looser but the

@@ -52,7 +52,7 @@ def test_the_law_corrects_the_delivery_error(short_scenario):
 
 @pytest.mark.slow
 def test_paper_scale_deep_impact(paper_scale):
-    """Acceptance of issue 2 (reduced to 300 runs in CI; --paper-scale runs the paper's 2000)."""
+    """Seed 000 (reduced to 300 runs in CI; --paper-scale runs the paper's 2000)."""
     runs = 2000 if paper_scale else 300
     los = gj.run_study(gj.load_scenario("deep-impact-los"), runs=runs, seed=0).summary()
     pred = gj.run_study(gj.load_scenario("deep-impact-predictive"), runs=runs, seed=0).summary()
@@ -65,7 +65,7 @@ def test_paper_scale_deep_impact(paper_scale):
 
 
 def test_hit_probability_counts_impacts_inside_the_target():
-    """Issue 15 item 5: a hit is an impact point inside the target's disc (a sphere here;
+    """A hit is an impact point inside the target's disc (a sphere here;
     no target gravity), counted against the B-plane points directly, with scipy's Wilson
     interval."""
     from scipy import stats
@@ -99,7 +99,7 @@ def test_image_update_equals_the_dense_joseph_ekf_with_rodrigues_attitudes():
         normalised_innovation_squared,
         predict_los,
     )
-    from gnc_jax.simulation.impactor import initial_conditions, take_image
+    from gnc_jax.systems.impactor.simulation import initial_conditions, take_image
 
     scenario = gj.load_scenario("deep-impact-los")
     sim, _ = gj.build(scenario)

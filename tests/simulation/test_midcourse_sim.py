@@ -10,9 +10,9 @@ import pytest
 
 import gnc_jax as gj
 from gnc_jax import cli, montecarlo
-from gnc_jax.guidance.targeting import AbstractMidcourseGuidance, AutonomousCorrection
+from gnc_jax.guidance.midcourse.targeting import AbstractMidcourseGuidance, AutonomousCorrection
 from gnc_jax.scenario import ScenarioError
-from gnc_jax.simulation import midcourse
+from gnc_jax.systems.midcourse import simulation as midcourse
 
 METHODS = {
     "autodiff": "phoenix-midcourse",

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 import gnc_jax as gj
-from gnc_jax.simulation.pn import estimate_pulse_trains, initial_state
+from gnc_jax.systems.intercept.simulation import initial_state
+from gnc_jax.systems.intercept.system import estimate_pulse_trains
 
 # A 2000 s approach (20 400 km, 10 km off) with proportionally smaller errors: same code paths.
 SHORT = [
@@ -101,7 +102,7 @@ def test_error_free_closed_loop_matches_the_pulse_train_closed_form(trigger_on):
 
 @pytest.mark.slow
 def test_paper_scale_monte_carlo(paper_scale):
-    """Issue 5 acceptance: miss RMS <= 150 m, Δv mean <= 20 m/s (paper: 83.4 m, 9.56 m/s).
+    """Seed 004: miss RMS <= 150 m, Δv mean <= 20 m/s (paper: 83.4 m, 9.56 m/s).
 
     2000 runs with --paper-scale; 60 in CI (the RMS of 60 runs is within ~20 % of the 2000's).
     """
@@ -119,7 +120,7 @@ def test_packed_filter_and_draw_blocks_keep_the_per_run_statistics(image_interva
     not a multiple of DRAW_BLOCK), and a 3 s image interval (three guidance steps per image,
     the spare pointing draws): every run ok, the filter converges across the LOS and the
     miss is removed; run i is the same in a batch of 2 and of 5 (per-run keys and blocks)."""
-    from gnc_jax.simulation.pn import DRAW_BLOCK, simulate
+    from gnc_jax.systems.intercept.simulation import DRAW_BLOCK, simulate
 
     over = SHORT + [f"navigation.image_interval_s={image_interval_s}"]
     scenario = gj.load_scenario("bennu-apn", overrides=over)
@@ -140,7 +141,7 @@ def test_packed_filter_and_draw_blocks_keep_the_per_run_statistics(image_interva
 
 
 def test_intercept_hit_probability_is_the_miss_against_the_target_radius():
-    """Issue 15 item 5 for the intercept: a hit is a B-plane miss inside Bennu's radius."""
+    """For the intercept, a hit is a B-plane miss inside Bennu's radius."""
     import gnc_jax as gj
 
     sc = gj.load_scenario("bennu-apn-ideal")

@@ -14,7 +14,7 @@ import math
 import jax.numpy as jnp
 
 from ..._types import Array, Float, PRNGKeyArray, Scalar, Vector3
-from ...scenario.schema import ScenarioError
+from ...schema import ScenarioError
 from ..camera import los_angles, small_rotation
 from ..centroid import extract_centroid
 from ..ekf import MeasurementPrediction, NavEstimate

@@ -34,13 +34,13 @@ import numpy as np
 import optax
 from tqdm.auto import tqdm
 
-from .._types import Array, Float, Scalar
-from ..dynamics.entry import EntryState
-from ..geometry.sphere import along_cross_track, to_earth_fixed, unit
-from ..integrate import rk4_step
-from ..root_finding import bounded_regula_falsi
-from ..scenario.schema import ScenarioError
-from .entry_common import (
+from ..._types import Array, Float, Scalar
+from ...dynamics.entry import EntryState
+from ...geometry.sphere import along_cross_track, to_earth_fixed, unit
+from ...integrate import rk4_step
+from ...root_finding import bounded_regula_falsi
+from ...schema import ScenarioError
+from .base import (
     EntryModel,
     drag_load_g,
     flight_variables,
@@ -49,7 +49,7 @@ from .entry_common import (
     hermite_state,
     perturb_switch_state,
 )
-from .skip_entry import ReferenceTrajectory
+from .reference import ReferenceTrajectory
 
 #: bump when the design procedure changes, so that cached references are redesigned
 REFERENCE_VERSION = 5
@@ -311,13 +311,16 @@ def _skips_and_lands(problem: NominalProblem, d_fpa, banks, profile_banks):
     return jax.vmap(lambda d: jnp.any(shifted(d)[1] == SKIP_LANDS))(d_fpa)
 
 
+FPA_RANGE_DEG = (-12.0, -2.0)
+"""Entry flight-path angles (deg) the design accepts, the range of ``entry.fpa_deg``: steeper,
+the load pulse lasts under three design steps; shallower, nothing is captured."""
+
+
 def _corridor(problem: NominalProblem, entry: dict, banks) -> str:
     """The entry flight-path angles (deg, 0.1 deg grid over the declared range) for which some
     candidate skips and lands, at this entry speed and vehicle."""
-    from ..scenario.capsule import SCHEMA  # the declared range
-
-    field = SCHEMA["entry"]["fpa_deg"]
-    grid = np.round(np.arange(field.lo, field.hi + 1e-9, 0.1), 1)
+    lo, hi = FPA_RANGE_DEG
+    grid = np.round(np.arange(lo, hi + 1e-9, 0.1), 1)
     d_fpa = np.radians(grid - entry["fpa_deg"])
     ok = np.asarray(
         _skips_and_lands(problem, jnp.asarray(d_fpa), jnp.asarray(banks), _profile_banks())
@@ -797,7 +800,7 @@ def reference_for(problem: NominalProblem, description: dict, **design_kwargs):
     if digest in _MEMORY:
         return _MEMORY[digest]
     name = f"reference-{digest}.npz"
-    packaged = importlib.resources.files("gnc_jax.guidance") / "references" / name
+    packaged = importlib.resources.files("gnc_jax.guidance.entry") / "references" / name
     path = cache_dir() / name
     source = path if path.is_file() else (packaged if packaged.is_file() else None)
     if source is not None:

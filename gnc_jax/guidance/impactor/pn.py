@@ -22,12 +22,13 @@ from typing import NamedTuple
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._types import Scalar
-from ..geometry.los import los_rate
-from ..params import param
-from ..scenario.schema import ScenarioError
-from .base import AbstractImpactorGuidance, EngineCommand, register_law, safe_unit
-from .trigger import schmitt_trigger
+from ..._types import Scalar
+from ...geometry.los import los_rate
+from ...params import param
+from ...schema import ScenarioError
+from ..base import EngineCommand, register_law, safe_unit
+from ..trigger import schmitt_trigger
+from .base import AbstractImpactorGuidance
 
 
 class PNState(NamedTuple):

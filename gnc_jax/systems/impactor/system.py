@@ -1,10 +1,9 @@
-"""The impactor system: a small-body impactor's terminal phase (seeds 000 and 002).
+"""The impactor system's contract: a small-body impactor's terminal phase (seeds 000 and 002).
 
-Truth, camera, EKF, guidance and engine are in :mod:`gnc_jax.simulation.impactor`; the laws in
-:mod:`gnc_jax.guidance` (family :class:`~gnc_jax.guidance.base.AbstractImpactorGuidance`: ``los``,
-``predictive``, and any law registered into it); the scenario sections in
-:mod:`gnc_jax.scenario.impactor`. This file is the contract that ties them together, with the
-summary statistics and the report figures.
+Truth, camera, EKF, guidance and engine are in :mod:`gnc_jax.systems.impactor.simulation`; the
+laws in the family :mod:`gnc_jax.guidance.impactor` (``los``, ``predictive``, ``pn`` and any law
+registered into it); the scenario sections in :mod:`gnc_jax.systems.impactor.schema`. This file
+ties them together, with the summary statistics and the report figures.
 """
 
 import dataclasses
@@ -16,68 +15,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._status import Status
-from ..geometry.ellipse import ellipse_probability
-from ..guidance.base import AbstractImpactorGuidance
-from ..montecarlo import simulate_one
-from ..navigation.camera import camera_attitude, los_angles
-from ..navigation.centroid import extract_centroid
-from ..navigation.measurements import AbstractMeasurement, measurement_class
-from ..navigation.render import choose_binning, phase_offset_tangent, render_frame, tangent_to_roi
-from ..plotting import ellipse_xy, pyplot, saver
-from ..scenario import impactor as impactor_scenario
-from ..simulation import impactor as impactor_sim
-from ..statistics import wilson_interval
-from .base import AbstractSystem, register_system
-
-
-def impact_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
-    miss = o["miss_m"][ok]
-    dv = o["dv_mps"][ok]
-    firings = o["firings"][ok]
-    if miss.size == 0:
-        return {}
-    counts = np.bincount(firings)
-    return dict(
-        miss_rms_m=float(np.sqrt(np.mean(miss**2))),
-        miss_mean_m=float(np.mean(miss)),
-        miss_max_m=float(np.max(miss)),
-        miss_p99_m=float(np.percentile(miss, 99)),
-        miss_t_mean_m=float(np.mean(o["miss_t_m"][ok])),
-        miss_r_mean_m=float(np.mean(o["miss_r_m"][ok])),
-        dv_mean_mps=float(np.mean(dv)),
-        dv_std_mps=float(np.std(dv)),
-        dv_max_mps=float(np.max(dv)),
-        firings_mean=float(np.mean(firings)),
-        firings_max=int(np.max(firings)),
-        firings_mode=int(np.argmax(counts)),
-        firings_histogram={int(k): int(v) for k, v in enumerate(counts) if v},
-        fuel_mean_kg=float(np.mean(o["fuel_kg"][ok])),
-    )
-
-
-HIT_RULE = (
-    "hit: the B-plane impact point inside the target's silhouette along S (the shadow of the "
-    "target as the scenario defines it: the [target] ellipsoid, or the sphere of "
-    "dynamics.target_radius_m of an intercept), widened by gravitational focusing; ok runs, "
-    "95 % Wilson interval"
-)
-
-
-def hit_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
-    """Probability of hitting the body (:mod:`gnc_jax.geometry.silhouette`) over the ``ok``
-    runs, with its 95 % Wilson score interval (:func:`gnc_jax.statistics.wilson_interval`)."""
-    n = int(np.sum(ok))
-    if n == 0:
-        return {}
-    hits = int(np.sum(o["silhouette_ratio"][ok] < 1.0))
-    lo, hi = wilson_interval(hits, n)
-    return dict(
-        hits=hits,
-        hit_probability=hits / n,
-        hit_probability_ci95=[lo, hi],
-        hit_rule=HIT_RULE,
-    )
+from ..._status import Status
+from ...geometry.ellipse import ellipse_probability
+from ...guidance.impactor.base import AbstractImpactorGuidance
+from ...navigation.camera import camera_attitude, los_angles
+from ...navigation.centroid import extract_centroid
+from ...navigation.measurements import AbstractMeasurement, measurement_class
+from ...navigation.render import choose_binning, phase_offset_tangent, render_frame, tangent_to_roi
+from ...plotting import ellipse_xy, pyplot, saver
+from ..base import AbstractSystem, TraceRequest, register_system
+from ..impact import IMPACT_LABELS, hit_statistics, impact_objective, impact_statistics
+from . import schema as impactor_scenario
+from . import simulation as impactor_sim
 
 
 def _impactor_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
@@ -177,7 +126,7 @@ def _engine_trace(plt, trace, scenario):
     return fig
 
 
-def impactor_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib.Path]:
+def impactor_figures(summary, runs, scenario, out: pathlib.Path, traces) -> list[pathlib.Path]:
     """B-plane impact points with 1σ/3σ ellipses, Δv and firings, run 0's engine trace
     (seed 000 Fig. 3 for the LOS law) and rendered frames (seed 002 Fig. 7)."""
     plt = pyplot()
@@ -186,7 +135,7 @@ def impactor_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib
     save = saver(plt, out, files)
     save(_b_plane_points(plt, summary, runs, ok, scenario), "b_plane.png")
     save(_dv_and_firings(plt, summary, runs, ok, scenario), "dv_firings.png")
-    _, trace = simulate_one(scenario, index=0, seed=summary.get("seed"))
+    _, trace = traces["run0"]
     save(_engine_trace(plt, trace, scenario), "engine_trace.png")
     files.append(_centroid_frames_figure(scenario, trace, out))
     return files
@@ -243,22 +192,7 @@ def _centroid_frames_figure(scenario, trace, out: pathlib.Path) -> pathlib.Path:
     return path
 
 
-IMPACT_LABELS = {
-    "miss_rms_m": "miss RMS (m)",
-    "miss_max_m": "miss max (m)",
-    "miss_mean_m": "miss mean (m)",
-    "dv_mean_mps": "Δv mean (m/s)",
-    "dv_max_mps": "Δv max (m/s)",
-    "firings_max": "firings max",
-    "firings_mode": "firings mode",
-    "firings_mean": "firings (mean)",
-}
 """How the published miss, Δv and firing metrics of an impact read (impactor and intercept)."""
-
-
-def impact_objective(outcomes):
-    """Miss (softened at 1 m) plus 10 s x Δv, averaged over the runs: differentiable."""
-    return jnp.mean(jnp.sqrt(outcomes.miss_m**2 + 1.0)) + 10.0 * jnp.mean(outcomes.dv_mps)
 
 
 @register_system
@@ -349,5 +283,8 @@ class ImpactorSystem(AbstractSystem):
     def statistics(self, outcomes, ok):
         return _impactor_statistics(outcomes, ok)
 
-    def figures(self, summary, runs, scenario, out):
-        return impactor_figures(summary, runs, scenario, out)
+    def figure_traces(self, summary, runs, scenario):
+        return {"run0": TraceRequest((0,), single=True)}
+
+    def figures(self, summary, runs, scenario, out, traces=None):
+        return impactor_figures(summary, runs, scenario, out, traces)

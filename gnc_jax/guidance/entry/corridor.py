@@ -32,11 +32,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._types import Array, Scalar
-from ..dynamics.entry import EntryConditions, EntryState, entry_state_from_conditions
-from ..geometry.sphere import along_cross_track, central_angle, destination, to_earth_fixed, unit
-from ..integrate import rk4_step
-from .entry_common import EntryModel, flight_variables
+from ..._types import Array, Scalar
+from ...dynamics.entry import EntryConditions, EntryState, entry_state_from_conditions
+from ...geometry.sphere import along_cross_track, central_angle, destination, to_earth_fixed, unit
+from ...integrate import rk4_step
+from .base import EntryModel, flight_variables
 
 DT_S = 2.0  # RK4 step of the open-loop flights (the reference design's step)
 FOOTPRINT_BANKS_DEG = np.arange(0.0, 180.0 + 1e-9, 5.0)  # the constant banks of the footprint

@@ -11,10 +11,10 @@ Hermite interpolation.
 
 The simulator holds only the truth (dynamics, actuator, loads and heating, chute crossing), the
 accelerometer measurement and the outcome; the guidance is a member of the
-:class:`~gnc_jax.guidance.entry_common.AbstractEntryGuidance` family, called with
+:class:`~gnc_jax.guidance.entry.base.AbstractEntryGuidance` family, called with
 ``init(nav, ctx)`` and ``step(state, nav, t, ctx)`` (``nav`` an
-:class:`~gnc_jax.guidance.entry_common.EntryNav`, ``ctx`` the
-:class:`~gnc_jax.guidance.entry_common.EntryGuidanceContext` of :func:`guidance_context`).
+:class:`~gnc_jax.guidance.entry.base.EntryNav`, ``ctx`` the
+:class:`~gnc_jax.guidance.entry.base.EntryGuidanceContext` of :func:`guidance_context`).
 """
 
 import math
@@ -24,10 +24,10 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._status import Status
-from .._types import Array, Float, PRNGKeyArray, Scalar, Vector3
-from ..dynamics.atmosphere import Atmosphere
-from ..dynamics.entry import (
+from ..._status import Status
+from ..._types import Array, Float, PRNGKeyArray, Scalar, Vector3
+from ...dynamics.atmosphere import Atmosphere
+from ...dynamics.entry import (
     G0,
     BankActuator,
     BankActuatorState,
@@ -43,13 +43,8 @@ from ..dynamics.entry import (
     sutton_graves_heat_rate,
     to_xyz,
 )
-from ..geometry.sphere import (
-    along_cross_track,
-    destination,
-    to_earth_fixed,
-    unit,
-)
-from ..guidance.entry_common import (
+from ...geometry.sphere import along_cross_track, destination, to_earth_fixed, unit
+from ...guidance.entry.base import (
     AbstractEntryGuidance,
     EntryGuidanceContext,
     EntryModel,
@@ -61,10 +56,10 @@ from ..guidance.entry_common import (
     hermite_crossing,
     hermite_state,
 )
-from ..integrate import rk4_step
-from ..params import from_scenario, param
-from ..root_finding import RootStatus
-from .base import with_status
+from ...integrate import rk4_step
+from ...params import from_scenario, param
+from ...root_finding import RootStatus
+from ..loop import with_status
 
 THIRD = 1.0 / 3.0  # the scenario gives 3-sigma values
 

@@ -31,32 +31,29 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._numerics import computed_once, cross3, dot3, norm3, safe_norm
-from .._random import stream_key, stream_normal
-from .._status import Status
-from .._types import Array, Float, Matrix3, PRNGKeyArray, Scalar, Vector3
-from ..dynamics.impactor import Engine, perturb_direction
-from ..dynamics.intercept import (
+from ..._numerics import computed_once, cross3, dot3, norm3, safe_norm
+from ..._random import stream_key, stream_normal
+from ..._status import Status
+from ..._types import Array, Float, Matrix3, PRNGKeyArray, Scalar, Vector3
+from ...dynamics.impactor import Engine, perturb_direction
+from ...dynamics.intercept import (
     InterceptDynamics,
     InterceptState,
     coast_to_b_plane,
     drift_kick_drift_step,
 )
-from ..geometry.bplane import b_plane_frame
-from ..geometry.kepler import OrbitalElements, elements_to_state
-from ..geometry.silhouette import focusing_factor
-from ..guidance.apn import (
+from ...geometry.bplane import b_plane_frame
+from ...geometry.kepler import OrbitalElements, elements_to_state
+from ...geometry.silhouette import focusing_factor
+from ...guidance.intercept.apn import (
     AugmentedPNGuidance,
     PNGuidanceContext,
     PNNavigation,
-    augmented_pn_command,
-    closing_speed,
-    pulse_train_estimate,
 )
-from ..navigation.camera import camera_axes
-from ..navigation.ekf import NavEstimate
-from ..navigation.measurements import AbstractMeasurement, Exposure, GaussianLOSMeasurement
-from ..navigation.packed_ekf import (
+from ...navigation.camera import camera_axes
+from ...navigation.ekf import NavEstimate
+from ...navigation.measurements import AbstractMeasurement, Exposure, GaussianLOSMeasurement
+from ...navigation.packed_ekf import (
     FULL,
     PLANAR,
     PackedCovariance,
@@ -67,8 +64,8 @@ from ..navigation.packed_ekf import (
     propagate_packed,
     unpack,
 )
-from ..params import from_scenario, param
-from .base import flatten_trace, scan_in_blocks, with_status
+from ...params import from_scenario, param
+from ..loop import flatten_trace, scan_in_blocks, with_status
 
 
 class PNErrors(eqx.Module):
@@ -401,7 +398,7 @@ def simulate(
 
     Args:
         sim: scenario data (:class:`PNSimulation`).
-        law: :class:`~gnc_jax.guidance.apn.AugmentedPNGuidance`.
+        law: :class:`~gnc_jax.guidance.intercept.apn.AugmentedPNGuidance`.
         key: this run's key, ``jax.random.fold_in(root, run_index)``.
         record: also return the guidance-rate :class:`PNRecord` trace (static).
     """
@@ -553,43 +550,11 @@ def build(scenario) -> PNSimulation:
     return sim
 
 
-def estimate_pulse_trains(scenario):
-    """Closed-form error-free Δv and pulse trains of a pn scenario.
-
-    See ``guidance.apn.pulse_train_estimate``.
-
-    Z0 and T come from the law's own view of the initial truth: Z0 = |A| T^2 / N with the
-    augmented command of eq. 11 (so the solar differential is included) and T = R / V_c.
-    """
-    from ..systems import get_system  # the law is built by the system (it imports this module)
-
-    sim, law = get_system(scenario.kind).build(scenario)
-    cfg = scenario.config
-    y0 = sim.y0
-    a1, _ = augmented_pn_command(PNNavigation(y0.r, y0.v, y0.r_target), 1.0, sim.dynamics)
-    big_t = float(jnp.linalg.norm(y0.r) / closing_speed(-y0.r, -y0.v))
-    sc = cfg["spacecraft"]
-    bit = sc["thrust_n"] * sc["pulse_width_s"] / sc["mass_kg"]
-    return pulse_train_estimate(
-        zem0_m=float(jnp.linalg.norm(a1)) * big_t**2,
-        tgo0_s=big_t,
-        n0=float(law.n0),
-        k=float(law.k),
-        n_min=float(law.n_min),
-        a_on_mps2=float(law.a_on_mps2),
-        a_off_mps2=float(law.a_off_mps2),
-        coast_s=float(cfg["guidance"]["coast_s"]),
-        engine_accel_mps2=bit / cfg["guidance"]["dt_s"],
-        impulse_bit_mps=bit,
-    )
-
-
 __all__ = [
     "PNErrors",
     "PNOutcome",
     "PNRecord",
     "PNSimulation",
     "build",
-    "estimate_pulse_trains",
     "simulate",
 ]

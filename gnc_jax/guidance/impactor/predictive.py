@@ -14,19 +14,18 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from .._numerics import smooth_norm
-from .._types import Array, Float, Scalar, Vector3
-from ..dynamics.impactor import ImpactorState, coast_to_b_plane, propagate
-from ..params import from_config, param
-from ..scenario.impactor import time_of_flight_s
-from ..scenario.schema import ScenarioError
-from .base import (
-    AbstractImpactorGuidance,
-    EngineCommand,
-    ImpactorGuidanceContext,
-    register_law,
-    safe_unit,
+from ..._numerics import smooth_norm
+from ..._types import Array, Float, Scalar, Vector3
+from ...dynamics.impactor import (
+    ImpactorState,
+    coast_to_b_plane,
+    propagate,
+    straight_line_time_to_b_plane,
 )
+from ...params import from_config, param
+from ...schema import ScenarioError
+from ..base import EngineCommand, register_law, safe_unit
+from .base import AbstractImpactorGuidance, ImpactorGuidanceContext
 
 
 class PredictiveGuidanceState(NamedTuple):
@@ -78,14 +77,21 @@ class PredictiveGuidance(AbstractImpactorGuidance):
         derived from the time of flight) when given, else ``burn_times_s``."""
         tgo = section.get("burn_tgo_s") or []
         if tgo:
-            tof = round(time_of_flight_s(config), 6)
+            tof = round(
+                straight_line_time_to_b_plane(
+                    config["approach"]["position_km"], config["approach"]["velocity_kmps"]
+                ),
+                6,
+            )
             return [round(tof - x, 6) for x in tgo], "guidance.predictive.burn_tgo_s"
         return list(section["burn_times_s"]), "guidance.predictive.burn_times_s"
 
     @classmethod
     def check(cls, section, config):
         cam, g = config["camera"], config["guidance"]
-        tof = time_of_flight_s(config)
+        tof = straight_line_time_to_b_plane(
+            config["approach"]["position_km"], config["approach"]["velocity_kmps"]
+        )
         t_cut = tof - g["cutoff_tgo_s"]
         tgo = section.get("burn_tgo_s") or []
         outside = [x for x in tgo if not g["cutoff_tgo_s"] < x <= tof]
@@ -136,7 +142,9 @@ class PredictiveGuidance(AbstractImpactorGuidance):
         half the arc (seed 002 places it 420 s, 6 % of the arc, before impact). Allowed, but
         usually a schedule left over from another approach's timeline."""
         bt, name = cls.schedule(section, config)
-        tof = time_of_flight_s(config)
+        tof = straight_line_time_to_b_plane(
+            config["approach"]["position_km"], config["approach"]["velocity_kmps"]
+        )
         arc = tof - config["guidance"]["cutoff_tgo_s"]
         if bt and bt[-1] < 0.5 * arc:
             return [

@@ -13,20 +13,15 @@ from typing import NamedTuple
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._numerics import cross3, dot3, norm3, safe_norm, sub3
-from .._types import Scalar
-from ..geometry.ellipse import b_plane_position_covariance, mean_position_error
-from ..geometry.los import los_rate, range_rate, zero_effort_miss
-from ..params import param
-from ..scenario.schema import ScenarioError
-from .base import (
-    AbstractImpactorGuidance,
-    EngineCommand,
-    ImpactorGuidanceContext,
-    register_law,
-    safe_unit,
-)
-from .trigger import schmitt_trigger
+from ..._numerics import cross3, dot3, norm3, safe_norm, sub3
+from ..._types import Scalar
+from ...geometry.ellipse import b_plane_position_covariance, mean_position_error
+from ...geometry.los import los_rate, range_rate, zero_effort_miss
+from ...params import param
+from ...schema import ScenarioError
+from ..base import EngineCommand, register_law, safe_unit
+from ..trigger import schmitt_trigger
+from .base import AbstractImpactorGuidance, ImpactorGuidanceContext
 
 
 def switching_curve(rho, rho_dot_scalar, rho_limit):

@@ -1,8 +1,10 @@
-"""The midcourse system: autonomous B-plane targeting on an interplanetary transfer (seed 001).
+"""The midcourse system's contract: autonomous B-plane targeting on an interplanetary transfer
+(seed 001).
 
-Truth propagation, navigation and execution errors are in :mod:`gnc_jax.simulation.midcourse`;
-the correction rule and its Newton targeter in :mod:`gnc_jax.guidance.targeting`; the scenario
-sections in :mod:`gnc_jax.scenario.midcourse`.
+Truth propagation, navigation and execution errors are in
+:mod:`gnc_jax.systems.midcourse.simulation`; the correction rule and its Newton targeter in
+:mod:`gnc_jax.guidance.midcourse.targeting`; the scenario sections in
+:mod:`gnc_jax.systems.midcourse.schema`.
 """
 
 import pathlib
@@ -11,12 +13,12 @@ from typing import Any, ClassVar
 import jax.numpy as jnp
 import numpy as np
 
-from .._status import Status
-from ..guidance.targeting import AbstractMidcourseGuidance
-from ..plotting import pyplot, saver
-from ..scenario import midcourse as midcourse_scenario
-from ..simulation import midcourse as midcourse_sim
-from .base import AbstractSystem, register_system
+from ..._status import Status
+from ...guidance.midcourse.targeting import AbstractMidcourseGuidance
+from ...plotting import pyplot, saver
+from ..base import AbstractSystem, register_system
+from . import schema as midcourse_scenario
+from . import simulation as midcourse_sim
 
 
 def _midcourse_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
@@ -291,5 +293,5 @@ class MidcourseSystem(AbstractSystem):
     def statistics(self, outcomes, ok):
         return _midcourse_statistics(outcomes, ok)
 
-    def figures(self, summary, runs, scenario, out):
+    def figures(self, summary, runs, scenario, out, traces=None):
         return midcourse_figures(summary, runs, scenario, out)

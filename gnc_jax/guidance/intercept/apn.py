@@ -29,14 +29,15 @@ from typing import NamedTuple
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._numerics import cross3, dot3, norm3
-from .._types import Scalar, Vector3
-from ..dynamics.intercept import InterceptDynamics
-from ..geometry.los import los_rate
-from ..params import from_config, param
-from ..scenario.schema import ScenarioError
-from .base import AbstractInterceptGuidance, EngineCommand, register_law, safe_unit
-from .trigger import schmitt_trigger  # re-exported: gnc_jax.guidance.apn.schmitt_trigger
+from ..._numerics import cross3, dot3, norm3
+from ..._types import Scalar, Vector3
+from ...dynamics.intercept import InterceptDynamics
+from ...geometry.los import los_rate
+from ...params import from_config, param
+from ...schema import ScenarioError
+from ..base import EngineCommand, register_law, safe_unit
+from ..trigger import schmitt_trigger  # re-exported: gnc_jax.guidance.intercept.apn.schmitt_trigger
+from .base import AbstractInterceptGuidance
 
 
 class PNNavigation(NamedTuple):
@@ -201,6 +202,28 @@ class AugmentedPNGuidance(AbstractInterceptGuidance):
         fallback = cross3(ctx.reference_normal, u)
         direction = safe_unit(a_cmd, fallback / norm3(fallback))
         return EngineCommand(on * ctx.pulse_fraction, direction), APNState(on, a_cmd, n)
+
+    def pulse_trains(
+        self, nav: PNNavigation, dynamics, coast_s, engine_accel_mps2, impulse_bit_mps
+    ) -> "PulseTrainEstimate":
+        """Closed-form error-free Δv and pulse trains of this law from the initial truth
+        ``nav`` (:func:`pulse_train_estimate`). Z0 and T come from the law's own view of it:
+        Z0 = |A| T^2 / N with the augmented command of eq. 11 (so the solar differential is
+        included) and T = R / V_c."""
+        a1, _ = augmented_pn_command(nav, 1.0, dynamics)
+        big_t = float(jnp.linalg.norm(nav.r) / closing_speed(-nav.r, -nav.v))
+        return pulse_train_estimate(
+            zem0_m=float(jnp.linalg.norm(a1)) * big_t**2,
+            tgo0_s=big_t,
+            n0=float(self.n0),
+            k=float(self.k),
+            n_min=float(self.n_min),
+            a_on_mps2=float(self.a_on_mps2),
+            a_off_mps2=float(self.a_off_mps2),
+            coast_s=coast_s,
+            engine_accel_mps2=engine_accel_mps2,
+            impulse_bit_mps=impulse_bit_mps,
+        )
 
 
 def trigger_scale(thrust_n, mass_kg, pulse_width_s, n_min, coast_s):

@@ -7,8 +7,8 @@ the heliocentric EME2000 axes (the paper's "x axis" is EME2000 x).
 
 import math
 
-from .. import time as gtime
-from .schema import Field, ScenarioError
+from ... import time as gtime
+from ...schema import Field, ScenarioError
 
 F = Field
 

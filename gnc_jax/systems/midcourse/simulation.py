@@ -29,28 +29,28 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._numerics import safe_norm
-from .._random import stream_normal
-from .._status import Status
-from .._types import Array, Float, PRNGKeyArray, Scalar, State6, Vector3
-from ..dynamics.ephemeris import (
+from ..._numerics import safe_norm
+from ..._random import stream_normal
+from ..._status import Status
+from ..._types import Array, Float, PRNGKeyArray, Scalar, State6, Vector3
+from ...dynamics.ephemeris import (
     ECLIPTIC_POLE_EQUATORIAL,
     GM_PLANETS,
     GM_SUN,
     planet_index,
     planet_state,
 )
-from ..dynamics.heliocentric import (
+from ...dynamics.heliocentric import (
     SOLAR_PRESSURE_1AU,
     EphemerisTable,
     HeliocentricModel,
     propagate,
     propagate_with_stm,
 )
-from ..geometry.bplane import BPlaneError, check_b_plane_frame
-from ..geometry.kepler import propagate_kepler
-from ..geometry.lambert import solve_lambert
-from ..guidance.targeting import (
+from ...geometry.bplane import BPlaneError, check_b_plane_frame
+from ...geometry.kepler import propagate_kepler
+from ...geometry.lambert import solve_lambert
+from ...guidance.midcourse.targeting import (
     SENSITIVITY_METHODS,
     AbstractMidcourseGuidance,
     AbstractSensitivity,
@@ -60,10 +60,10 @@ from ..guidance.targeting import (
     jacobian_autodiff,
     jacobian_central_difference,
 )
-from ..params import from_scenario, param
-from ..scenario import ScenarioError
-from ..scenario.midcourse import epochs_s
-from .base import with_status
+from ...params import from_scenario, param
+from ...schema import ScenarioError
+from ..loop import with_status
+from .schema import epochs_s
 
 
 def _pct(x):

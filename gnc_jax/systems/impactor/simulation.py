@@ -15,11 +15,11 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._numerics import V3, as_array, as_v3, computed_once, matmul, matvec3
-from .._random import stream_key, stream_normal
-from .._status import Status
-from .._types import Array, Float, PRNGKeyArray, Scalar, Vector3
-from ..dynamics.impactor import (
+from ..._numerics import V3, as_array, as_v3, computed_once, matmul, matvec3
+from ..._random import stream_key, stream_normal
+from ..._status import Status
+from ..._types import Array, Float, PRNGKeyArray, Scalar, Vector3
+from ...dynamics.impactor import (
     G0,
     Engine,
     ImpactorState,
@@ -28,17 +28,13 @@ from ..dynamics.impactor import (
     rk4,
     tilt_direction,
 )
-from ..geometry.bplane import b_plane_frame, check_b_plane_frame
-from ..geometry.ellipse import b_plane_position_covariance, mean_position_error
-from ..geometry.silhouette import focusing_factor, silhouette_matrix, silhouette_ratio
-from ..guidance.base import AbstractImpactorGuidance, ImpactorGuidanceContext
-from ..navigation.camera import camera_axes, rotate_rows, small_rotation_entries
-from ..navigation.ekf import (
-    NIS_BOUND_2DOF,
-    NavEstimate,
-    navigation_lost,
-)
-from ..navigation.measurements import (
+from ...geometry.bplane import b_plane_frame, check_b_plane_frame
+from ...geometry.ellipse import b_plane_position_covariance, mean_position_error
+from ...geometry.silhouette import focusing_factor, silhouette_matrix, silhouette_ratio
+from ...guidance.impactor.base import AbstractImpactorGuidance, ImpactorGuidanceContext
+from ...navigation.camera import camera_axes, rotate_rows, small_rotation_entries
+from ...navigation.ekf import NIS_BOUND_2DOF, NavEstimate, navigation_lost
+from ...navigation.measurements import (
     AbstractMeasurement,
     Exposure,
     GaussianLOSMeasurement,
@@ -47,7 +43,7 @@ from ..navigation.measurements import (
     measurement_class,
     target_model,
 )
-from ..navigation.packed_ekf import (
+from ...navigation.packed_ekf import (
     LOSGain,
     PackedCovariance,
     apply_gain,
@@ -57,10 +53,10 @@ from ..navigation.packed_ekf import (
     propagate_packed,
     unpack,
 )
-from ..navigation.render import CameraModel, TargetModel
-from ..params import from_scenario, param
-from ..scenario.impactor import time_of_flight_s
-from .base import flatten_trace, with_status
+from ...navigation.render import CameraModel, TargetModel
+from ...params import from_scenario, param
+from ..loop import flatten_trace, with_status
+from .schema import time_of_flight_s
 
 URAD = 1e-6  # file urad -> rad
 UG = 1e-6 * G0  # file micro-g -> m/s^2

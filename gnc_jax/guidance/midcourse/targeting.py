@@ -47,17 +47,17 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._types import Array, Float, Scalar, State6, Vector3
-from ..dynamics.heliocentric import (
+from ..._types import Array, Float, Scalar, State6, Vector3
+from ...dynamics.heliocentric import (
     HeliocentricModel,
     propagate_to_encounter,
     propagate_to_encounter_with_stm,
     relative_state,
 )
-from ..geometry.hyperbola import b_plane_hyperbolic
-from ..params import from_config, param
-from ..scenario.schema import ScenarioError
-from .base import AbstractGuidanceLaw, register_law
+from ...geometry.hyperbola import b_plane_hyperbolic
+from ...params import from_config, param
+from ...schema import ScenarioError
+from ..base import AbstractGuidanceLaw, register_law
 
 QFunction = Callable[[Float[Array, " m"]], Float[Array, " n"]]
 QJacobianFunction = Callable[[Float[Array, " m"]], tuple[Float[Array, " n"], Float[Array, "n m"]]]

@@ -1,8 +1,8 @@
-"""The capsule system: a lunar-return skip entry with the combined predictor-corrector /
-reference-trajectory guidance of seed 003.
+"""The capsule system's contract: lunar-return skip entry (seed 003).
 
-Truth, actuator and sensors are in :mod:`gnc_jax.simulation.capsule`; the law in
-:mod:`gnc_jax.guidance.skip_entry`; the scenario sections in :mod:`gnc_jax.scenario.capsule`.
+Truth, actuator and sensors are in :mod:`gnc_jax.systems.capsule.simulation`; the law in
+:mod:`gnc_jax.guidance.entry.skip_entry`; the scenario sections in
+:mod:`gnc_jax.systems.capsule.schema`.
 """
 
 import math
@@ -14,16 +14,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._status import Status
-from ..dynamics.entry import entry_state_from_conditions
-from ..geometry.sphere import unit
-from ..guidance.corridor import DT_S, EntryEnvelope, track_footprints
-from ..guidance.entry_common import AbstractEntryGuidance, EntryModel
-from ..montecarlo import run_key, simulate_traces
-from ..plotting import ellipse_xy, pyplot, saver
-from ..scenario import capsule as capsule_scenario
-from ..simulation import capsule as capsule_sim
-from .base import AbstractSystem, register_system
+from ..._random import run_key
+from ..._status import Status
+from ...dynamics.entry import entry_state_from_conditions
+from ...geometry.sphere import unit
+from ...guidance.entry.base import AbstractEntryGuidance, EntryModel
+from ...guidance.entry.corridor import DT_S, EntryEnvelope, track_footprints
+from ...plotting import ellipse_xy, pyplot, saver
+from ..base import AbstractSystem, TraceRequest, register_system
+from . import schema as capsule_scenario
+from . import simulation as capsule_sim
 
 # Cost model of CapsuleSystem.steps_per_run: trajectory fractions of the paper scenario.
 MEAN_SPEED_FRACTION = 0.58  # chute range / (flight time x entry speed): 8000 km in 1250 s at 11
@@ -215,7 +215,7 @@ def _bank_histories(plt, tr, scenario):
     return fig
 
 
-def capsule_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib.Path]:
+def capsule_figures(summary, runs, scenario, out: pathlib.Path, traces) -> list[pathlib.Path]:
     """Seed 003 Figs. 4-6 (predictions, altitude-range fan, chute scatter), bank histories and
     the chute miss against the dispersed L/D."""
     plt = pyplot()
@@ -226,14 +226,14 @@ def capsule_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib.
     save(_chute_scatter(plt, summary, scenario, dr, cr), "chute_scatter.png")
     save(_predictions(plt, runs, ok, scenario), "predictions.png")
     save(_miss_against_ld(plt, runs, ok, scenario, dr, cr), "miss_vs_ld.png")
-    _, tr = simulate_traces(scenario, np.flatnonzero(ok), seed=summary.get("seed"), every=5)
+    _, tr = traces["ok_runs"]
     save(_altitude_range_fan(plt, tr, scenario), "altitude_range_fan.png")
     save(_bank_histories(plt, tr, scenario), "bank_histories.png")
     return files
 
 
 def entry_envelope(config: dict, load_limit_g: float) -> EntryEnvelope:
-    """The entry corridor and footprint (:class:`~gnc_jax.guidance.corridor.EntryEnvelope`)
+    """The entry corridor and footprint (:class:`~gnc_jax.guidance.entry.corridor.EntryEnvelope`)
     of a validated capsule configuration's nominal vehicle, atmosphere and entry."""
     earth, vehicle, atmosphere, entry = capsule_sim.nominal_models(config)
     model = EntryModel(vehicle, earth, atmosphere)
@@ -244,7 +244,7 @@ def entry_envelope(config: dict, load_limit_g: float) -> EntryEnvelope:
 @jax.jit(static_argnames=("steps",))
 def _run_footprints(sim, seed, indices, steps):
     """Footprints (m) of the runs ``indices`` of root seed ``seed``: each run's dispersed
-    entry state, vehicle and atmosphere (:func:`~gnc_jax.simulation.capsule.dispersed_entry`
+    entry state, vehicle and atmosphere (:func:`~gnc_jax.systems.capsule.simulation.dispersed_entry`
     on :func:`~gnc_jax.montecarlo.run_key`, the draws of the study), flown open loop."""
 
     def one(i):
@@ -260,7 +260,7 @@ def dispersed_footprints(config: dict, runs: int, seed: int) -> np.ndarray:
     """Each Monte Carlo run's own reachable footprint, shape (runs, 2), km: the shortest and
     longest chute range of run ``i`` (0 .. runs - 1) of a study of ``config`` with root seed
     ``seed``, flown open loop at the constant banks of the nominal footprint with its
-    landing-edge bisection (:func:`~gnc_jax.guidance.corridor.track_footprint`) by the run's
+    landing-edge bisection (:func:`~gnc_jax.guidance.entry.corridor.track_footprint`) by the run's
     own dispersed vehicle, atmosphere and entry state (the same draws as
     :func:`~gnc_jax.run_study`); NaN where no bank lands (a skip-out even with full lift
     down). Ranges along the nominal entry -> target track from the nominal entry point (the
@@ -375,7 +375,7 @@ class CapsuleSystem(AbstractSystem):
         return float(truth + cycles * min(PREDICTIONS_PER_CYCLE, slots) * horizon)
 
     def envelope_check(self, configs, load_limit_g=None, runs=None, seed=None, **options):
-        """Entry corridor pre-check (:mod:`gnc_jax.guidance.corridor`): a cell whose entry
+        """Entry corridor pre-check (:mod:`gnc_jax.guidance.entry.corridor`): a cell whose entry
         flight-path angle skips out even with full lift down (overshoot) or exceeds the load
         limit even with full lift up (undershoot) is infeasible. Columns: the corridor's ends
         and the nominal vehicle's reachable footprint (constant-bank extreme chute ranges) at
@@ -516,5 +516,9 @@ class CapsuleSystem(AbstractSystem):
     def statistics(self, outcomes, ok):
         return _capsule_statistics(outcomes, ok)
 
-    def figures(self, summary, runs, scenario, out):
-        return capsule_figures(summary, runs, scenario, out)
+    def figure_traces(self, summary, runs, scenario):
+        ok = runs["status"] == Status.ok
+        return {"ok_runs": TraceRequest(tuple(np.flatnonzero(ok).tolist()), every=5)}
+
+    def figures(self, summary, runs, scenario, out, traces=None):
+        return capsule_figures(summary, runs, scenario, out, traces)

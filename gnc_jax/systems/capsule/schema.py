@@ -3,7 +3,8 @@
 File units follow the paper (km, km/s, deg, %, 3-sigma dispersions); the simulation is SI.
 """
 
-from .schema import Field, ScenarioError
+from ...guidance.entry.reference_design import FPA_RANGE_DEG
+from ...schema import Field, ScenarioError
 
 F = Field
 
@@ -30,8 +31,8 @@ SCHEMA = {
         "fpa_deg": F(
             "float",
             -5.9,
-            lo=-12.0,
-            hi=-2.0,
+            lo=FPA_RANGE_DEG[0],
+            hi=FPA_RANGE_DEG[1],
             units="deg",
             doc="Earth-relative; steeper than -12 deg the load pulse lasts under three 2 s "
             "steps of the design and a 'pull-up' happens only near the ground, which the phase "

@@ -17,9 +17,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._types import Array, Float, Scalar, Vector3
-from ..dynamics.atmosphere import Atmosphere
-from ..dynamics.entry import (
+from ..._types import Array, Float, Scalar, Vector3
+from ...dynamics.atmosphere import Atmosphere
+from ...dynamics.entry import (
     G0,
     EarthModel,
     EntryState,
@@ -33,8 +33,8 @@ from ..dynamics.entry import (
     gravity_acceleration,
     sensed_load_g,
 )
-from ..geometry.sphere import central_angle, to_earth_fixed, unit
-from .base import AbstractGuidanceLaw
+from ...geometry.sphere import central_angle, to_earth_fixed, unit
+from ..base import AbstractGuidanceLaw
 
 
 class EntryModel(eqx.Module):

@@ -6,7 +6,8 @@ simulation is built; the field names carry the units.
 
 import math
 
-from .schema import Field, ScenarioError
+from ...dynamics.impactor import straight_line_time_to_b_plane
+from ...schema import Field, ScenarioError
 
 F = Field
 
@@ -241,10 +242,9 @@ SCHEMA = {
 
 def time_of_flight_s(cfg: dict) -> float:
     """Nominal time of flight to the B-plane (s) of the straight-line approach."""
-    r = cfg["approach"]["position_km"]
-    v = cfg["approach"]["velocity_kmps"]
-    vv = sum(x * x for x in v)
-    return -sum(a * b for a, b in zip(r, v)) / vv
+    return straight_line_time_to_b_plane(
+        cfg["approach"]["position_km"], cfg["approach"]["velocity_kmps"]
+    )
 
 
 def _norm(v) -> float:

@@ -1,9 +1,9 @@
-"""The intercept system: a deep-space impactor on a heliocentric intercept with augmented PN
+"""The intercept system's contract: deep-space intercept with variable-coefficient augmented PN
 and pulse firing (seed 004).
 
-Truth, camera, EKF, law and pulses are in :mod:`gnc_jax.simulation.pn`; the laws in the family
-:class:`~gnc_jax.guidance.base.AbstractInterceptGuidance` (``apn``); the scenario sections in
-:mod:`gnc_jax.scenario.pn`.
+Truth, camera, EKF, law and pulses are in :mod:`gnc_jax.systems.intercept.simulation`; the laws
+in the family :mod:`gnc_jax.guidance.intercept` (``apn``); the scenario sections in
+:mod:`gnc_jax.systems.intercept.schema`.
 """
 
 import math
@@ -12,14 +12,14 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .._status import Status
-from ..guidance.base import AbstractInterceptGuidance
-from ..montecarlo import simulate_one
-from ..plotting import ellipse_xy, pyplot, saver
-from ..scenario import pn as intercept_scenario
-from ..simulation import pn as intercept_sim
-from .base import AbstractSystem, register_system
-from .impactor import IMPACT_LABELS, hit_statistics, impact_objective, impact_statistics
+from ..._status import Status
+from ...guidance.intercept.apn import PNNavigation
+from ...guidance.intercept.base import AbstractInterceptGuidance
+from ...plotting import ellipse_xy, pyplot, saver
+from ..base import AbstractSystem, TraceRequest, register_system
+from ..impact import IMPACT_LABELS, hit_statistics, impact_objective, impact_statistics
+from . import schema as intercept_scenario
+from . import simulation as intercept_sim
 
 
 def _intercept_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
@@ -73,7 +73,45 @@ def _pn_command_panel(ax, trace, law, title):
     ax.legend(loc="upper left", fontsize=7)
 
 
-def intercept_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathlib.Path]:
+def estimate_pulse_trains(scenario):
+    """Closed-form error-free Δv and pulse trains of an intercept scenario: its law's
+    ``pulse_trains`` (seed 004 eqs. 11-12,
+    :func:`gnc_jax.guidance.intercept.apn.pulse_train_estimate`) from the scenario's initial
+    truth, engine and coast."""
+    sim, law = InterceptSystem().build(scenario)
+    cfg = scenario.config
+    y0 = sim.y0
+    sc = cfg["spacecraft"]
+    bit = sc["thrust_n"] * sc["pulse_width_s"] / sc["mass_kg"]
+    return law.pulse_trains(
+        PNNavigation(y0.r, y0.v, y0.r_target),
+        sim.dynamics,
+        coast_s=float(cfg["guidance"]["coast_s"]),
+        engine_accel_mps2=bit / cfg["guidance"]["dt_s"],
+        impulse_bit_mps=bit,
+    )
+
+
+_LAW_CASES = (  # seed 004 Table 3: the three laws flown error-free from the same scenario
+    ("variable N (N0 = 8, k = 2), Fig. 7", 8.0, 2.0),
+    ("constant N = 3, Fig. 8", 3.0, 0.0),
+    ("constant N = 8, Fig. 9", 8.0, 0.0),
+)
+
+
+def _law_case(n0: float, k: float) -> dict:
+    """Overrides of an error-free run of the APN law with ``n0`` and ``k``."""
+    return {
+        "navigation.model": "perfect",
+        "errors.attitude_urad": 0.0,
+        "navigation.knowledge_position_km": [0.0, 0.0, 0.0],
+        "navigation.knowledge_velocity_mps": 0.0,
+        "guidance.apn.n0": n0,
+        "guidance.apn.k": k,
+    }
+
+
+def intercept_figures(summary, runs, scenario, out: pathlib.Path, traces) -> list[pathlib.Path]:
     """Seed 004: command histories (Figs. 7-9), B-plane misses (Fig. 10), Δv and firings."""
     plt = pyplot()
     ok = runs["status"] == Status.ok
@@ -83,25 +121,17 @@ def intercept_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathli
 
     # Run 0 of the study, then the three laws of Table 3 error-free from the same scenario.
     _, law = InterceptSystem().build(scenario)
-    _, trace = simulate_one(scenario, index=0, seed=summary.get("seed"))
+    _, trace = traces["run0"]
     fig, ax = plt.subplots(figsize=(10, 4.5))
     g = scenario.config["guidance"]["apn"]
     _pn_command_panel(ax, trace, law, f"{scenario.name}, run 0: N0 = {g['n0']:g}, k = {g['k']:g}")
     ax.set_xlabel("mission time (h)")
     save(fig, "command_trace.png")
 
-    ideal = {"navigation.model": "perfect", "errors.attitude_urad": 0.0}
-    ideal["navigation.knowledge_position_km"] = [0.0, 0.0, 0.0]
-    ideal["navigation.knowledge_velocity_mps"] = 0.0
-    cases = (
-        ("variable N (N0 = 8, k = 2), Fig. 7", 8.0, 2.0),
-        ("constant N = 3, Fig. 8", 3.0, 0.0),
-        ("constant N = 8, Fig. 9", 8.0, 0.0),
-    )
     fig, axes = plt.subplots(3, 1, figsize=(10, 10), sharex=True)
-    for ax, (title, n0, k) in zip(axes, cases):
-        sc = scenario.with_overrides({**ideal, "guidance.apn.n0": n0, "guidance.apn.k": k})
-        o, tr = simulate_one(sc, index=0, seed=0)
+    for ax, (title, n0, k) in zip(axes, _LAW_CASES):
+        sc = scenario.with_overrides(_law_case(n0, k))
+        o, tr = traces[title]
         _, law_k = InterceptSystem().build(sc)
         _pn_command_panel(
             ax,
@@ -162,8 +192,8 @@ def intercept_steps(config: dict) -> float:
     """Cost of one intercept run (:meth:`InterceptSystem.steps_per_run`) in guidance steps of
     the EKF loop: the guidance steps (a step with perfect navigation costs 0.4 of one), the LOS
     images (an EKF update costs 1.4 steps) and the final coast's RK4 steps, from the loop
-    lengths :func:`gnc_jax.simulation.pn.build` sets; a float, so that a scenario whose loops
-    would not fit in an integer still gets a (refusable) estimate."""
+    lengths :func:`gnc_jax.systems.intercept.simulation.build` sets; a float, so that a
+    scenario whose loops would not fit in an integer still gets a (refusable) estimate."""
     g, nv = config["guidance"], config["navigation"]
     t_cut = intercept_scenario.time_of_flight_s(config) - g["coast_s"]
     images = t_cut / nv["image_interval_s"]
@@ -214,5 +244,11 @@ class InterceptSystem(AbstractSystem):
     def statistics(self, outcomes, ok):
         return _intercept_statistics(outcomes, ok)
 
-    def figures(self, summary, runs, scenario, out):
-        return intercept_figures(summary, runs, scenario, out)
+    def figure_traces(self, summary, runs, scenario):
+        cases = {
+            t: TraceRequest((0,), _law_case(n0, k), seed=0, single=True) for t, n0, k in _LAW_CASES
+        }
+        return {"run0": TraceRequest((0,), single=True), **cases}
+
+    def figures(self, summary, runs, scenario, out, traces=None):
+        return intercept_figures(summary, runs, scenario, out, traces)

@@ -8,7 +8,7 @@ reasons are given in the field docs and in README "Augmented PN".
 
 import math
 
-from .schema import Field, ScenarioError
+from ...schema import Field, ScenarioError
 
 F = Field
 

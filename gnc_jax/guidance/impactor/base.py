@@ -1,0 +1,54 @@
+"""The impactor terminal-guidance family: its base, the on-board mission context it reads, and
+the registry of its laws (``los``, ``predictive``, ``pn``)."""
+
+from typing import ClassVar
+
+import equinox as eqx
+import jax.numpy as jnp
+
+from ..._types import Array, Float, Matrix3, Scalar, Vector3
+from ...dynamics.impactor import Engine, RelativeDynamics
+from ...geometry.bplane import b_plane_point_to_inertial
+from ..base import AbstractGuidanceLaw
+
+
+class ImpactorGuidanceContext(eqx.Module):
+    """Mission data known on board: B-plane frame, aim points, engine, timing.
+
+    Attributes:
+        c_bi: B-plane frame rows (S, T, R), inertial.
+        aim_initial_m: aim point (B_T, B_R) before the retarget time, m.
+        aim_final_m: aim point after it (seed 000 Table 2: (1, 3) km), m.
+        retarget_time_s: mission time at which the aim point changes (t_go = 750 s nominal).
+        cutoff_time_s: no burn is commanded from this mission time on.
+        engine, mass_kg: nominal engine and initial mass used by the laws.
+        dynamics: the on-board model of the differential gravity (predictors).
+        dt_s: control step; image_interval_s: navigation image interval.
+    """
+
+    c_bi: Matrix3
+    aim_initial_m: Float[Array, "2"]
+    aim_final_m: Float[Array, "2"]
+    retarget_time_s: Scalar
+    cutoff_time_s: Scalar
+    engine: Engine
+    mass_kg: Scalar
+    dynamics: RelativeDynamics
+    dt_s: float = eqx.field(static=True)
+    image_interval_s: float = eqx.field(static=True)
+
+    def aim_b_plane(self, t) -> Float[Array, "2"]:
+        return jnp.where(t >= self.retarget_time_s, self.aim_final_m, self.aim_initial_m)
+
+    def aim_point(self, t) -> Vector3:
+        """Inertial position of the current aim point (relative to the target), m."""
+        return b_plane_point_to_inertial(self.aim_b_plane(t), self.c_bi)
+
+
+class AbstractImpactorGuidance(AbstractGuidanceLaw):
+    """Family base of the impactor terminal-guidance laws: ``nav`` is the filter's
+    :class:`~gnc_jax.navigation.ekf.NavEstimate`, ``ctx`` an :class:`ImpactorGuidanceContext`,
+    ``plan`` runs after each image's filter update, ``step`` returns an
+    :class:`EngineCommand`."""
+
+    laws: ClassVar[dict[str, type]] = {}

@@ -1,0 +1,76 @@
+"""Statistics of the systems that end in an impact on a small body (the impactor and the
+intercept): B-plane miss statistics, the hit probability on the target's silhouette, their
+paper labels and the smooth tuning objective."""
+
+from typing import Any
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..statistics import wilson_interval
+
+
+def impact_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
+    miss = o["miss_m"][ok]
+    dv = o["dv_mps"][ok]
+    firings = o["firings"][ok]
+    if miss.size == 0:
+        return {}
+    counts = np.bincount(firings)
+    return dict(
+        miss_rms_m=float(np.sqrt(np.mean(miss**2))),
+        miss_mean_m=float(np.mean(miss)),
+        miss_max_m=float(np.max(miss)),
+        miss_p99_m=float(np.percentile(miss, 99)),
+        miss_t_mean_m=float(np.mean(o["miss_t_m"][ok])),
+        miss_r_mean_m=float(np.mean(o["miss_r_m"][ok])),
+        dv_mean_mps=float(np.mean(dv)),
+        dv_std_mps=float(np.std(dv)),
+        dv_max_mps=float(np.max(dv)),
+        firings_mean=float(np.mean(firings)),
+        firings_max=int(np.max(firings)),
+        firings_mode=int(np.argmax(counts)),
+        firings_histogram={int(k): int(v) for k, v in enumerate(counts) if v},
+        fuel_mean_kg=float(np.mean(o["fuel_kg"][ok])),
+    )
+
+
+HIT_RULE = (
+    "hit: the B-plane impact point inside the target's silhouette along S (the shadow of the "
+    "target as the scenario defines it: the [target] ellipsoid, or the sphere of "
+    "dynamics.target_radius_m of an intercept), widened by gravitational focusing; ok runs, "
+    "95 % Wilson interval"
+)
+
+
+def hit_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
+    """Probability of hitting the body (:mod:`gnc_jax.geometry.silhouette`) over the ``ok``
+    runs, with its 95 % Wilson score interval (:func:`gnc_jax.statistics.wilson_interval`)."""
+    n = int(np.sum(ok))
+    if n == 0:
+        return {}
+    hits = int(np.sum(o["silhouette_ratio"][ok] < 1.0))
+    lo, hi = wilson_interval(hits, n)
+    return dict(
+        hits=hits,
+        hit_probability=hits / n,
+        hit_probability_ci95=[lo, hi],
+        hit_rule=HIT_RULE,
+    )
+
+
+IMPACT_LABELS = {
+    "miss_rms_m": "miss RMS (m)",
+    "miss_max_m": "miss max (m)",
+    "miss_mean_m": "miss mean (m)",
+    "dv_mean_mps": "Δv mean (m/s)",
+    "dv_max_mps": "Δv max (m/s)",
+    "firings_max": "firings max",
+    "firings_mode": "firings mode",
+    "firings_mean": "firings (mean)",
+}
+
+
+def impact_objective(outcomes):
+    """Miss (softened at 1 m) plus 10 s x Δv, averaged over the runs: differentiable."""
+    return jnp.mean(jnp.sqrt(outcomes.miss_m**2 + 1.0)) + 10.0 * jnp.mean(outcomes.dv_mps)
