@@ -22,11 +22,11 @@ In one process, for ``lunar-skip-entry``:
   identical chunk's own excess over the predictor's isolated step cost is the corrector's
   overhead in the loop (per prediction: its start and end point, the root finder's
   bookkeeping, the loop's carried state);
-* **ablations** -- against the default (same chunk, same core): the issue-18 corrector start
+* **ablations** -- against the default (same chunk, same core): the corrector start
   ``corrector_start = "secant"`` (planned-profile warm start, secant steps, Anderson-Bjorck:
   fewer predictions; an option, as it can settle on a lofting root at shallow entries), the
   bank held over 8 s predictor steps (the predictor before the midpoint bank at 16 s) and
-  that throughout, without 32 s coast steps (the predictor before issue 18); and the
+  that throughout, without 32 s coast steps (the seed's predictor steps); and the
   dispersion removed (every run of the chunk the same run: the lock-step waiting
   gone, the work per run kept);
 * **predictions** per trajectory of each variant (the paper gives 39.3);
@@ -206,16 +206,16 @@ def predictor_step(sim, law, n, repeats):
 
 VARIANTS = {  # ablations against the default (the seed's bracketing start, midpoint bank,
     # 16 s steps, 32 s coast steps)
-    "now": {},
+    "default": {},
     "secant corrector start (option)": {"corrector_start": "secant"},
-    "held bank, 8 s steps (before)": {"predictor_bank": "step", "predictor_dt_s": 8.0},
-    "held bank, 8 s steps, no coast (before issue 18)": {
+    "held bank, 8 s steps": {"predictor_bank": "step", "predictor_dt_s": 8.0},
+    "held bank, 8 s steps, no coast": {
         "predictor_bank": "step",
         "predictor_dt_s": 8.0,
         "predictor_coast_dt_s": 8.0,
     },
 }
-IDENTICAL = "now, every run identical"  # the lock-step waiting removed
+IDENTICAL = "default, every run identical"  # the lock-step waiting removed
 STEP_VARIANTS = {  # further points for the cost-against-predictor-steps figure
     "8 s / 32 s coast": {"predictor_dt_s": 8.0},
     "12 s / 32 s coast": {"predictor_dt_s": 12.0},
@@ -326,7 +326,7 @@ def run(quick: bool = False, measure_100k: bool = False) -> dict:
 
     bare, _ = bare_limit(sim, n, repeats)
     variant_rows, measured = [], {}
-    variants = {"now": {}} if quick else {**VARIANTS, **STEP_VARIANTS, IDENTICAL: {}}
+    variants = {"default": {}} if quick else {**VARIANTS, **STEP_VARIANTS, IDENTICAL: {}}
     for name, change in variants.items():
         variant = dataclasses.replace(law, **change)
         wall, out, compile_s = closed_loop(sim, variant, n, repeats, name == IDENTICAL)
@@ -350,8 +350,8 @@ def run(quick: bool = False, measure_100k: bool = False) -> dict:
         )
         measured[name] = (out, wall)
 
-    # profile of the chunk (now): per control step of the chunk's loop
-    n_control, per_control = _per_control_step(sim, n, *measured["now"])
+    # profile of the chunk (default): per control step of the chunk's loop
+    n_control, per_control = _per_control_step(sim, n, *measured["default"])
     if quick:  # the pieces need four more compilations
         t_truth = t_guid = t_pred = float("nan")
     else:
@@ -359,7 +359,7 @@ def run(quick: bool = False, measure_100k: bool = False) -> dict:
         t_guid = guidance_only(sim, law, n, n_control, repeats)
         t_pred = predictor_step(sim, law, n, repeats)
     corrector = per_control - t_truth - t_guid
-    useful_pred = float(np.mean(measured["now"][0].predictor_steps)) * t_pred / n_control
+    useful_pred = float(np.mean(measured["default"][0].predictor_steps)) * t_pred / n_control
     # the corrector without the waiting: the identical chunk's corrector time per predictor
     # step at this chunk's predictor steps; the rest of the corrector's time is waiting
     no_wait = float("nan")

@@ -1,4 +1,4 @@
-"""Accuracy per cost of fixed-step integrators on the capsule predictor's arc (issue 3 item 3).
+"""Accuracy per cost of fixed-step integrators on the capsule predictor's arc.
 
     python benchmarks/entry_integrators.py
 

@@ -1,4 +1,4 @@
-"""Scale-out (issue 16): 1 device, 2 devices and a 2-worker local Dask cluster; memory in N.
+"""Scale-out: 1 device, 2 devices and a 2-worker local Dask cluster; memory in N.
 
     python benchmarks/scale.py [--quick]
 

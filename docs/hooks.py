@@ -1,4 +1,4 @@
-"""mkdocs hook: the reference pages generated from the code before every build (issue 17).
+"""mkdocs hook: the reference pages generated from the code before every build.
 
 The CLI page comes from the argument parser, the scenario-field page from each system's
 schema and the status page from :class:`gnc_jax.Status` and the CLI's exit codes, so none of

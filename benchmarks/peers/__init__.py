@@ -1,1 +1,1 @@
-"""Peer implementations of gnc_jax's studies in the tools users would pick instead (issue #18)."""
+"""Peer implementations of gnc_jax's studies in the tools users would pick instead."""

@@ -1,4 +1,4 @@
-"""Basilisk peer of the ``deep-impact-los`` closed loop (issue #18): the same study built from
+"""Basilisk peer of the ``deep-impact-los`` closed loop: the same study built from
 Basilisk's own modules, run on both cores through its Monte Carlo controller and a process pool.
 
     python -m benchmarks.peers.basilisk_impactor [--quick] [--runs N]
@@ -21,7 +21,7 @@ How each Basilisk piece maps to gnc_jax (``simulation/impactor.py`` unless named
   cannot express the law's trigger: its Schmitt levels are fixed fractions of a requested on-time,
   while the LOS law compares |omega| with switching curves that move at every step, and its
   thrusters are body-fixed (the law steers an inertial direction). The engine is therefore the
-  external-force effector commanded by the guidance module, as the issue allows.
+  external-force effector commanded by the guidance module.
 - ``ImpactorLOSGNC``, a Basilisk **Python module** (``sysModel.SysModel`` subclass with
   ``Reset``/``UpdateState``; reads ``SCStatesMsg``, writes ``CmdForceInertialMsg``) <-> the rest of
   the closed loop, transcribed in numpy with the same equations:
@@ -846,9 +846,9 @@ def run(
     notes = [
         f"gnc_jax ({ref['runs']} runs, {ref['per_s']:.0f} traj/s) / Basilisk closed loop with "
         f"the Python GNC module (fastest path, {best['closed loop']['name']}): "
-        f"{best['closed loop']['ratio_gnc_jax']:.0f}x (issue #18 asks >= 300x); / Basilisk "
+        f"{best['closed loop']['ratio_gnc_jax']:.0f}x (target >= 300x); / Basilisk "
         f"framework floor ({best['floor']['name']}): {best['floor']['ratio_gnc_jax']:.0f}x "
-        "(asks >= 60x)",
+        "(target >= 60x)",
         _per_step_note(best, params),
         f"machine: {platform.machine()}, {os.cpu_count()} cores, "
         f"Python {platform.python_version()}, bsk {_bsk_version()}; every row uses both cores "

@@ -1,4 +1,4 @@
-"""The hand-written numba peer of gnc_jax's flagship closed loop, ``deep-impact-los`` (issue 18).
+"""The hand-written numba peer of gnc_jax's flagship closed loop, ``deep-impact-los``.
 
     python benchmarks/peers/numba_impactor.py [--quick] [--sizes 2000 10000] [--repeats 3]
 
@@ -1000,7 +1000,7 @@ def _markdown(rows):
 
 def run(quick: bool = False, sizes=None, repeats: int | None = None) -> dict:
     """The numba peer's benchmark rows (see the module docstring)."""
-    title = "numba peer of the deep-impact-los closed loop (issue 18)"
+    title = "numba peer of the deep-impact-los closed loop"
     if numba is None:
         return {"title": title, "rows": [], "markdown": "numba is not installed", "notes": []}
     sizes = sizes or ([500] if quick else [2000, 10000])

@@ -1,4 +1,4 @@
-"""Open-loop propagation against the tools a user would pick instead (issue 18, peers).
+"""Open-loop propagation against the tools a user would pick instead (peers).
 
     python benchmarks/peers/propagation.py [--quick] [--arcs 1000] [--repeats 5]
 
