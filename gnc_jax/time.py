@@ -14,13 +14,14 @@ floats, NumPy arrays and traced JAX arrays.
 import math
 import re
 
+from .constants import SECONDS_PER_DAY
+
 J2000_JD = 2451545.0
 """Julian date of the J2000.0 epoch, 2000-01-01T12:00:00 TDB."""
 
 MJD_ZERO_JD = 2400000.5
 """Julian date of MJD 0 (1858-11-17T00:00:00)."""
 
-SECONDS_PER_DAY = 86400.0
 DAYS_PER_JULIAN_CENTURY = 36525.0
 
 # Days from 0000-03-01 (proleptic Gregorian) to 2000-01-01, see `_days_from_civil`.

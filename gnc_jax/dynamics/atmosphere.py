@@ -25,9 +25,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._types import Array, Float, Scalar
+from ..constants import G0_MPS2
 
 # --- constants of the standard (SI; the standard quotes km and g/mol) ---
-_G0 = 9.80665  # m/s^2, sea-level gravity
+_G0 = G0_MPS2  # m/s^2, sea-level gravity
 _R_GAS = 8.31432  # J/(mol K), the standard's gas constant R*
 _AVOGADRO = 6.022169e23  # 1/mol
 _R0 = 6.356766e6  # m, effective Earth radius for gravity and geopotential

@@ -38,9 +38,10 @@ import jax
 import jax.numpy as jnp
 
 from .._types import Array, Float, Scalar, Vector3
+from ..constants import EARTH_EQUATORIAL_RADIUS_M, EARTH_GM_M3S2, G0_MPS2
 from .atmosphere import Atmosphere
 
-G0 = 9.80665  # m/s^2, standard gravity: the unit of the sensed load N_g
+G0 = G0_MPS2  # m/s^2, standard gravity: the unit of the sensed load N_g
 SUTTON_GRAVES_K_EARTH = 1.7415e-4  # kg^0.5/m: Sutton-Graves constant for air, SI units
 
 
@@ -55,8 +56,10 @@ class EarthModel(eqx.Module):
     Zero ``j2`` gives point-mass gravity; zero ``rotation_rate`` a non-rotating Earth.
     """
 
-    mu: Scalar = eqx.field(default=3.986004418e14, converter=jnp.asarray)
-    equatorial_radius_m: Scalar = eqx.field(default=6378137.0, converter=jnp.asarray)
+    mu: Scalar = eqx.field(default=EARTH_GM_M3S2, converter=jnp.asarray)
+    equatorial_radius_m: Scalar = eqx.field(
+        default=EARTH_EQUATORIAL_RADIUS_M, converter=jnp.asarray
+    )
     j2: Scalar = eqx.field(default=1.08262668e-3, converter=jnp.asarray)
     rotation_rate: Scalar = eqx.field(default=7.2921159e-5, converter=jnp.asarray)
 

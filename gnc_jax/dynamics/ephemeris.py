@@ -35,6 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
+from ..constants import AU_M, SECONDS_PER_DAY
 from ..geometry.kepler import solve_kepler_elliptic, true_anomaly_from_eccentric
 
 PLANETS: tuple[str, ...] = (
@@ -49,10 +50,6 @@ PLANETS: tuple[str, ...] = (
 )
 """Planet names in index order; "earth" is the Earth–Moon barycentre."""
 
-AU_M = 149_597_870_700.0
-"""Astronomical unit (IAU 2012 Resolution B2), m."""
-
-SECONDS_PER_DAY = 86400.0
 
 OBLIQUITY_J2000_RAD = 84381.448 * np.pi / (180.0 * 3600.0)
 """Mean obliquity of the ecliptic at J2000.0, IAU 1976 (Lieske et al. 1977), rad."""

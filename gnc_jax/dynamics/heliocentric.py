@@ -37,6 +37,7 @@ import jax.numpy as jnp
 
 from .._status import Status
 from .._types import Array, Float, Matrix3, Scalar, Vector3
+from ..constants import SECONDS_PER_DAY
 from ..geometry.kepler import time_since_periapsis
 from .ephemeris import AU_M, GM_PLANETS, GM_SUN, planet_index, planet_state, planet_states
 
@@ -92,7 +93,7 @@ class EphemerisTable(eqx.Module):
     nodes: Float[Array, "k 3 8 3"]  # node, (position, velocity, acceleration), planet, xyz
 
     @classmethod
-    def spanning(cls, t_start_s: float, t_end_s: float, step_s: float = 86400.0):
+    def spanning(cls, t_start_s: float, t_end_s: float, step_s: float = SECONDS_PER_DAY):
         """A table covering [t_start_s, t_end_s] (with one node of margin at each end)."""
         n = int(jnp.ceil((t_end_s - t_start_s) / step_s)) + 3
         ts = t_start_s - step_s + step_s * jnp.arange(n)

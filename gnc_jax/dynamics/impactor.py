@@ -13,10 +13,11 @@ import jax.numpy as jnp
 
 from .._numerics import V3, as_array, as_v3, dot3
 from .._types import Array, Float, Scalar, Vector3
+from ..constants import G0_MPS2
 from ..geometry.bplane import b_plane_crossing
 from ..integrate import integrate_fixed, rk4_step
 
-G0 = 9.80665  # standard gravity, m/s^2 (Isp and accelerometer "g" units)
+G0 = G0_MPS2  # standard gravity, m/s^2 (Isp and accelerometer "g" units)
 
 
 class ImpactorState(NamedTuple):

@@ -6,6 +6,7 @@ simulation is built; the field names carry the units.
 
 import math
 
+from ...constants import G0_MPS2, SECONDS_PER_DAY
 from ...dynamics.impactor import straight_line_time_to_b_plane
 from ...schema import Field, ScenarioError
 
@@ -13,7 +14,9 @@ F = Field
 
 MIN_RANGE_RADII = 2.0  # the approach starts at least this many target radii away
 MIN_SPEED_KMPS = 1e-3
-MAX_TOF_S = 30 * 86400.0  # a terminal phase; longer approaches are cruise (midcourse system)
+MAX_TOF_S = (
+    30 * SECONDS_PER_DAY
+)  # a terminal phase; longer approaches are cruise (midcourse system)
 MIN_SUN_AU = 0.01
 MAX_TIDE_RATIO = 0.05  # |r| / Sun distance of the linearised tide
 MIN_IMAGES = 2
@@ -272,7 +275,7 @@ def _check_dv_budget(cfg: dict, tof: float) -> None:
     aim = max(_norm(cfg["guidance"]["aim_initial_km"]), _norm(cfg["guidance"]["aim_final_km"]))
     need = max(_norm(b_vec) - aim, 0.0) * 1e3 / tof
     capacity = (
-        sc["isp_s"] * 9.80665 * math.log(sc["mass_kg"] / (sc["mass_kg"] - sc["propellant_kg"]))
+        sc["isp_s"] * G0_MPS2 * math.log(sc["mass_kg"] / (sc["mass_kg"] - sc["propellant_kg"]))
     )
     if need > capacity:
         raise ScenarioError(

@@ -19,6 +19,7 @@ from ..._numerics import V3, as_array, as_v3, computed_once, matmul, matvec3
 from ..._random import stream_key, stream_normal
 from ..._status import Status
 from ..._types import Array, Float, PRNGKeyArray, Scalar, Vector3
+from ...constants import AU_M, GM_SUN_M3S2
 from ...dynamics.impactor import (
     G0,
     Engine,
@@ -784,9 +785,8 @@ def build(scenario) -> ImpactorSimulation:
     # Mission times derived from the time of flight are rounded to 1 us so that a scheduled
     # event at "t_go = 750 s" coincides with a burn scheduled at 6450 s despite rounding.
     tof = round(time_of_flight_s(cfg), 6)
-    au, mu_sun = 1.495978707e11, 1.32712440018e20
-    d = dy["sun_distance_au"] * au
-    tide = mu_sun / d**3 if d > 0 else 0.0
+    d = dy["sun_distance_au"] * AU_M
+    tide = GM_SUN_M3S2 / d**3 if d > 0 else 0.0
     sun = f(dy["sun_direction"])
     dynamics = RelativeDynamics.of(dy["mu_target_m3s2"], tide, sun / jnp.linalg.norm(sun))
     engine = Engine(f(sc["thrust_n"]), f(sc["isp_s"]))

@@ -8,11 +8,11 @@ reasons are given in the field docs and in README "Augmented PN".
 
 import math
 
+from ...constants import AU_M
 from ...schema import Field, ScenarioError
 
 F = Field
 
-AU_M = 1.495978707e11
 SUN_RADIUS_M = 6.957e8  # IAU 2015 nominal solar radius
 
 SCHEMA = {

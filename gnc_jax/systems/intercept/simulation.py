@@ -35,6 +35,7 @@ from ..._numerics import computed_once, cross3, dot3, norm3, safe_norm
 from ..._random import stream_key, stream_normal
 from ..._status import Status
 from ..._types import Array, Float, Matrix3, PRNGKeyArray, Scalar, Vector3
+from ...constants import AU_M
 from ...dynamics.impactor import Engine, perturb_direction
 from ...dynamics.intercept import (
     InterceptDynamics,
@@ -479,7 +480,7 @@ def initial_state(cfg: dict) -> tuple[InterceptState, bool]:
         vel_rtn = np.array([v_rel @ radial, v_rel @ transverse, v_rel[2]])
         deg = np.pi / 180.0
         el = OrbitalElements(
-            a["semi_major_axis_au"] * 1.495978707e11,
+            a["semi_major_axis_au"] * AU_M,
             a["eccentricity"],
             a["inclination_deg"] * deg,
             a["raan_deg"] * deg,

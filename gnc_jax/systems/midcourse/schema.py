@@ -8,6 +8,7 @@ the heliocentric EME2000 axes (the paper's "x axis" is EME2000 x).
 import math
 
 from ... import time as gtime
+from ...constants import SECONDS_PER_DAY
 from ...schema import Field, ScenarioError
 
 F = Field
@@ -135,7 +136,7 @@ def fix_epochs_s(cfg: dict) -> list[float]:
     """Epochs of the navigation fixes, seconds past J2000 TDB."""
     t0 = epochs_s(cfg)["first_fix_epoch"]
     nav = cfg["navigation"]
-    return [t0 + i * nav["interval_days"] * 86400.0 for i in range(nav["fixes"])]
+    return [t0 + i * nav["interval_days"] * SECONDS_PER_DAY for i in range(nav["fixes"])]
 
 
 def check(cfg: dict) -> None:
@@ -163,12 +164,13 @@ def check(cfg: dict) -> None:
             f"({m['encounter_epoch']})"
         )
     last = fix_epochs_s(cfg)[-1]
-    if not last < t["encounter_epoch"] - 86400.0:
-        days = (t["encounter_epoch"] - t["first_fix_epoch"]) / 86400.0
+    if not last < t["encounter_epoch"] - SECONDS_PER_DAY:
+        days = (t["encounter_epoch"] - t["first_fix_epoch"]) / SECONDS_PER_DAY
         nav = cfg["navigation"]
         raise ScenarioError(
             f"navigation.fixes: {nav['fixes']} fixes every {nav['interval_days']:g} days end "
-            f"{(last - t['encounter_epoch']) / 86400.0:+.1f} days from encounter; allowed: the "
+            f"{(last - t['encounter_epoch']) / SECONDS_PER_DAY:+.1f} days from encounter; "
+            "allowed: the "
             f"last fix at least 1 day before encounter, i.e. (fixes - 1) * interval_days < "
             f"{days - 1.0:g}"
         )

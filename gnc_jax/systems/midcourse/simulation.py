@@ -33,6 +33,7 @@ from ..._numerics import safe_norm
 from ..._random import stream_normal
 from ..._status import Status
 from ..._types import Array, Float, PRNGKeyArray, Scalar, State6, Vector3
+from ...constants import SECONDS_PER_DAY
 from ...dynamics.ephemeris import (
     ECLIPTIC_POLE_EQUATORIAL,
     GM_PLANETS,
@@ -560,7 +561,7 @@ def design_nominal(sim: MidcourseSimulation, t_launch_s: float) -> NominalTransf
         r0_m=jnp.zeros(3),
         v0_mps=jnp.zeros(3),
         t_first_fix_s=sim.t_first_fix_s,
-        fix_interval_s=jnp.asarray(86400.0),
+        fix_interval_s=jnp.asarray(SECONDS_PER_DAY),
         t_encounter_s=sim.t_encounter_s,
         t_max_s=sim.t_max_s,
         aim=aim3,
@@ -657,7 +658,7 @@ def _simulation(cfg: dict) -> MidcourseSimulation:
     )
     f = lambda x: jnp.asarray(x, dtype=jnp.float64)  # noqa: E731
     t = epochs_s(cfg)
-    t_max = t["encounter_epoch"] + dy["window_days"] * 86400.0
+    t_max = t["encounter_epoch"] + dy["window_days"] * SECONDS_PER_DAY
     aim_bt_br = f(mi["aim_b_km"]) * 1e3
     aim = jnp.stack([aim_bt_br[1], aim_bt_br[0]])  # Q order: (B_R, B_T[, t])
     if g["targets"] == "b_plane_tof":
@@ -667,7 +668,7 @@ def _simulation(cfg: dict) -> MidcourseSimulation:
         r0_m=jnp.zeros(3),
         v0_mps=jnp.zeros(3),
         t_first_fix_s=f(t["first_fix_epoch"]),
-        fix_interval_s=f(nv["interval_days"] * 86400.0),
+        fix_interval_s=f(nv["interval_days"] * SECONDS_PER_DAY),
         t_encounter_s=f(t["encounter_epoch"]),
         t_max_s=f(t_max),
         aim=aim,

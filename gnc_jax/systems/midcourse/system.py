@@ -14,6 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._status import Status
+from ...constants import SECONDS_PER_DAY
 from ...guidance.midcourse.targeting import AbstractMidcourseGuidance
 from ...plotting import pyplot, saver
 from ..base import AbstractSystem, register_system
@@ -112,10 +113,10 @@ def _partials_vs_epsilon(plt, sim):
 def _partials_vs_time(plt, sim, eps_g):
     """Seed 001 Figs. 2-3 along the nominal, and the departures of the methods from autodiff."""
     t_enc, t_fix = float(sim.t_encounter_s), float(sim.t_first_fix_s)
-    span_days = (t_enc - t_fix) / 86400.0
+    span_days = (t_enc - t_fix) / SECONDS_PER_DAY
     days = np.concatenate([np.linspace(span_days, 10.0, 20), np.geomspace(8.0, 1.1, 8)])
     sweep = midcourse_sim.partials_vs_time(
-        sim, jnp.asarray(t_enc - days * 86400.0), eps_g, t_enc - 86400.0
+        sim, jnp.asarray(t_enc - days * SECONDS_PER_DAY), eps_g, t_enc - SECONDS_PER_DAY
     )
     ks = {method: np.asarray(k) for method, k in sweep.items()}
     wrt, rows = WRT, ROWS
@@ -166,8 +167,8 @@ def _dv_per_fix(plt, summary, runs, ok, scenario, sim):
     columns.sort(key=lambda c: int(c.rsplit("_", 1)[1]))
     per_fix = np.stack([runs[c] for c in columns], axis=1)
     fix_epochs = t_fix + float(sim.fix_interval_s) * np.arange(per_fix.shape[1])
-    fix_days = (t_enc - fix_epochs) / 86400.0
-    width = 0.8 * float(sim.fix_interval_s) / 86400.0 if per_fix.shape[1] > 1 else 5.0
+    fix_days = (t_enc - fix_epochs) / SECONDS_PER_DAY
+    width = 0.8 * float(sim.fix_interval_s) / SECONDS_PER_DAY if per_fix.shape[1] > 1 else 5.0
     fig, ax = plt.subplots(figsize=(10, 4.5))
     ax.bar(fix_days, per_fix[0], width=width, color="C0", alpha=0.7, label="run 0")
     if ok.sum() > 1:
@@ -229,7 +230,7 @@ def midcourse_steps(config: dict) -> float:
     dy, nv, g = config["dynamics"], config["navigation"], config["guidance"]
     law = g[g["law"]]
     t = midcourse_scenario.epochs_s(config)
-    span = max((t["encounter_epoch"] - t["first_fix_epoch"]) / 86400.0, 1.0)
+    span = max((t["encounter_epoch"] - t["first_fix_epoch"]) / SECONDS_PER_DAY, 1.0)
     steps = _ARC_STEPS[dy["solver"]] * (dy["rtol"] / 1e-13) ** -_RTOL_GROWTH
     arc = min(steps, dy["max_steps"]) * _STEP_COST[dy["solver"]]  # from the first fix
     solve = law["iterations"] * _ITERATION_ARCS[law["sensitivity"]] + 1.0
