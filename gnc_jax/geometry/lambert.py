@@ -98,8 +98,8 @@ def _time_of_flight_derivatives(x: Array, lam: Array, t: Array) -> tuple[Array, 
 
 
 def _initial_guess(t: Array, lam: Array) -> Array:
-    """Zero-revolution starting x, Izzo (2015) eq. 30 (middle branch as corrected in poliastro
-    issue 1362: x0 = exp(ln 2 ln(T/T0) / ln(T1/T0)) - 1)."""
+    """Zero-revolution starting x, Izzo (2015) eq. 30 (middle branch as corrected in poliastro,
+    poliastro/poliastro#1362: x0 = exp(ln 2 ln(T/T0) / ln(T1/T0)) - 1)."""
     t0 = jnp.arccos(lam) + lam * jnp.sqrt(1.0 - lam * lam)  # T at x = 0 (eq. 19)
     t1 = 2.0 / 3.0 * (1.0 - lam**3)  # T at x = 1 (eq. 21)
     t_safe = jnp.maximum(t, 1e-300)
