@@ -9,6 +9,7 @@ import pytest
 
 import gnc_jax as gj
 from gnc_jax import cli, montecarlo
+from gnc_jax import study as study_module
 from gnc_jax.scenario import ScenarioError
 
 SHORT = [
@@ -298,6 +299,7 @@ def test_a_study_whose_every_run_failed_exits_3(tmp_path, capsys, monkeypatch):
             return out._replace(miss_m=out.miss_m * float("nan")), trace
 
     monkeypatch.setattr(montecarlo, "get_system", lambda kind: AlwaysNaN())
+    monkeypatch.setattr(study_module, "get_system", lambda kind: AlwaysNaN())
     toy = pathlib.Path(__file__).with_name("toy.toml")
     out = tmp_path / "toy"
     assert cli.main(["run", str(toy), "--runs", "4", "--out", str(out), "--no-progress"]) == 3
