@@ -33,8 +33,6 @@ def _positive_int(name):
 
 
 _seed = _number("--seed", int, lambda v: 0 <= v < 2**32, "an integer in [0, 2^32)")
-
-
 _hours = _number("--max-hours", float, lambda v: 0 < v < float("inf"), "a number > 0")
 
 

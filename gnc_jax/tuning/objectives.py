@@ -86,7 +86,6 @@ TERMS: dict[str, ObjectiveTerm] = {
 """Built-in objective terms by name: a weighted sum of them is written ``"miss_rms+10*dv_mean"``
 (``peak_load(8)``, ``hit_probability(300)`` take an argument)."""
 
-
 _TERM_RE = re.compile(r"^\s*(?:([0-9.eE+-]+)\s*\*\s*)?([a-z_]+)\s*(?:\(\s*([^)]*)\s*\))?\s*$")
 
 

@@ -144,8 +144,6 @@ class TuningProblem:
 
 
 _JITTED: dict = {}
-
-
 _COMPILED: dict = {}
 
 

@@ -12,8 +12,6 @@ from .state import Components, EntryArgs, EntryState, EntryStateXYZ, Vec
 from .vectors import _combine, _cross, _dot, _inverse_norm, _plus_z, _scaled, _unit
 
 G0 = 9.80665  # m/s^2, standard gravity: the unit of the sensed load N_g
-
-
 SUTTON_GRAVES_K_EARTH = 1.7415e-4  # kg^0.5/m: Sutton-Graves constant for air, SI units
 
 

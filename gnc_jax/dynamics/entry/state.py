@@ -44,7 +44,6 @@ class EntryConditions(NamedTuple):
 Components = tuple[Scalar, Scalar, Scalar]
 """A vector as its three ECI components (scalars; arrays over the runs under ``vmap``)."""
 
-
 Vec = Components | Vector3
 """Either layout: the physics (``vectors``, ``forces``) is written once for both."""
 

@@ -12,10 +12,7 @@ UNIVERSAL_ITERATIONS = 30
 at most 8 and hyperbolas 10; near-parabolic orbits (|1 - e| < 1e-3) take a few bisection
 steps first and need up to 20 (tests/geometry/test_kepler.py)."""
 
-
 _STUMPFF_SERIES_LIMIT = 1.0  # |psi| below which the Stumpff functions use their series
-
-
 _STUMPFF_SERIES_TERMS = 10  # (|psi| < 1: the last term is < 1 / 21! ~ 2e-20)
 
 
