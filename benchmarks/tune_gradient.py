@@ -36,7 +36,7 @@ def measure(system_name, mode, runs, short):
     )
     law = system.law_name(scenario.config)
     params = [n for n in system.tunable_names() if n.startswith(f"guidance.{law}.")]
-    problem = tuning._Problem(
+    problem = tuning.TuningProblem(
         scenario,
         tuning.resolve_gains(scenario, params),
         tuning.parse_objective(None, scenario),

@@ -39,7 +39,7 @@ values = tuning.hard_objectives(scenario, params, args.objective, valid, args.ru
 for g, v in zip(valid, values, strict=True):
     print(f"{np.round(g, 4)}: {v:.5g} ({100 * (v / values[0] - 1):+.2f} %)", flush=True)
 
-problem = tuning._Problem(scenario, order, tuning.parse_objective(args.objective, scenario), 0)
+problem = tuning.TuningProblem(scenario, order, tuning.parse_objective(args.objective, scenario), 0)
 idx, w = problem.padded(np.arange(args.gradient_runs))
 theta = jnp.asarray(param.theta(centre))
 grad = jax.jit(jax.jacfwd(lambda th: problem.smooth(problem.args, th, problem.law_temperature,

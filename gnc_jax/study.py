@@ -155,6 +155,41 @@ def run_study(
     """
     runs = scenario.runs if runs is None else runs
     seed = scenario.seed if seed is None else seed
+    _check_request(
+        runs, seed, chunk_size, out, resume, overwrite, client, workers, max_hours,
+        max_memory_fraction,
+    )  # fmt: skip
+    system = get_system(scenario.kind)
+    cost = _checked_cost(scenario, runs, n_devices, max_hours)
+    if resume and chunk_size is None:
+        chunk_size = _recorded_chunk_size(out)
+    announce = cost.seconds is not None and cost.seconds > ANNOUNCE_S and progress is not False
+    if announce:
+        print(f"{scenario.name}: estimated {cost}", file=sys.stderr)
+    distributed = client is not None or workers is not None
+    n_dev = min(n_devices or len(jax.devices()), len(jax.devices()))
+    chunk = _plan_chunk(system, runs, chunk_size, n_dev, announce, cost, distributed)
+    n_chunks = -(-runs // chunk)
+    bounds = [(c * chunk, min((c + 1) * chunk, runs)) for c in range(n_chunks)]
+    store = _open_store(out, scenario, seed, runs, chunk, resume, overwrite)
+    try:
+        parts, compile_s, wall_s, n_workers = _run_chunks(
+            scenario, system, seed, runs, chunk, bounds, store, progress, announce, distributed,
+            n_devices, max_memory_fraction, client, workers,
+        )  # fmt: skip
+        return _finish(
+            scenario, runs, seed, parts, n_chunks, store, compile_s, wall_s, n_dev, chunk, n_workers
+        )
+    finally:
+        if store is not None:
+            store.close()
+
+
+def _check_request(
+    runs, seed, chunk_size, out, resume, overwrite, client, workers, max_hours,
+    max_memory_fraction,
+) -> None:  # fmt: skip
+    """:class:`ScenarioError` naming the first bad argument of :func:`run_study`."""
     if isinstance(runs, bool) or not isinstance(runs, int) or runs <= 0:
         raise ScenarioError(f"runs: {runs!r}; allowed: an integer >= 1")
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**32:
@@ -185,20 +220,49 @@ def run_study(
             raise ScenarioError(
                 f"{name}: {value!r}; allowed: a number > 0" + (f" and <= {hi:g}" if hi else "")
             )
-    system = get_system(scenario.kind)
+
+
+def _checked_cost(scenario, runs, n_devices, max_hours):
+    """The study's :func:`estimate_cost`; :class:`ScenarioError` when over ``max_hours``."""
     cost = estimate_cost(scenario, runs, n_devices)
     if cost.seconds is not None and cost.seconds > max_hours * 3600:
         raise ScenarioError(
             f"cost: {cost}; allowed: at most {max_hours:g} h (raise max_hours, CLI --max-hours, "
             "or use fewer runs or a coarser step)"
         )
-    if resume and chunk_size is None:
-        chunk_size = _recorded_chunk_size(out)
-    announce = cost.seconds is not None and cost.seconds > ANNOUNCE_S and progress is not False
-    if announce:
-        print(f"{scenario.name}: estimated {cost}", file=sys.stderr)
-    distributed = client is not None or workers is not None
-    n_dev = min(n_devices or len(jax.devices()), len(jax.devices()))
+    return cost
+
+
+def _finish(
+    scenario, runs, seed, parts, n_chunks, store, compile_s, wall_s, n_dev, chunk, n_workers
+):
+    """The :class:`Study` of the finished chunks: in memory (``parts``), or read from ``store``
+    once its summary and scenario are written."""
+    if store is None:
+        fields = list(parts[0])
+        outcomes = {k: np.concatenate([parts[c][k] for c in range(n_chunks)]) for k in fields}
+        return Study(
+            scenario, runs, seed, outcomes, compile_s, wall_s, n_dev, chunk, workers=n_workers
+        )
+    study = Study(
+        scenario,
+        runs,
+        seed,
+        None,
+        compile_s,
+        wall_s,
+        n_dev,
+        chunk,
+        store.path,
+        workers=n_workers,
+    )
+    store.finish(study.summary(), scenario.to_toml())
+    return study
+
+
+def _plan_chunk(system, runs, chunk_size, n_dev, announce, cost, distributed) -> int:
+    """Runs per chunk: ``chunk_size``, else equal chunks of at most the system's default (of
+    about 10 s each when the study is announced), padded for the devices when local."""
     default_chunk = system.chunk_per_device * n_dev if system.chunk_per_device else 1024
     if chunk_size is None and announce:  # chunks of about 10 s: a progress bar with an ETA
         default_chunk = int(max(1, min(default_chunk, 10.0 * runs / cost.seconds)))
@@ -207,107 +271,94 @@ def run_study(
         chunk = -(-runs // -(-runs // chunk))
     if not distributed:
         chunk = padded_chunk(chunk, n_dev, system.vector_lanes)
-    n_chunks = -(-runs // chunk)
-    bounds = [(c * chunk, min((c + 1) * chunk, runs)) for c in range(n_chunks)]
+    return chunk
 
-    store = None
-    if out is not None:
-        from .store import StudyStore, code_version
 
-        manifest = dict(
-            scenario_name=scenario.name,
-            kind=scenario.kind,
-            scenario_sha256=hashlib.sha256(scenario.to_toml().encode()).hexdigest(),
-            seed=seed,
-            runs=runs,
-            chunk_size=chunk,
-            code_version=code_version(),
-        )
-        store = StudyStore(out, manifest, resume=resume, overwrite=overwrite)
-    try:
-        todo = [c for c in range(n_chunks) if store is None or not store.valid_chunk(c, *bounds[c])]
-        show = (
-            progress
-            if progress is not None
-            else (n_chunks > 1 and (sys.stderr.isatty() or announce))
-        )
-        bar = tqdm(
-            total=runs,
-            initial=sum(bounds[c][1] - bounds[c][0] for c in range(n_chunks) if c not in todo),
-            desc=scenario.name,
-            unit="run",
-            disable=not show,
-        )
-        parts: dict[int, dict] = {}
+def _open_store(out, scenario, seed, runs, chunk, resume, overwrite):
+    """The study directory ``out`` opened for this study (``None`` without one)."""
+    if out is None:
+        return None
+    from .store import StudyStore, code_version
 
-        def finished(c, outcomes):
-            start, stop = bounds[c]
-            outcomes = {k: np.asarray(v)[: stop - start] for k, v in outcomes.items()}
-            _nan_to_status(outcomes)
-            if store is not None:
-                store.write_chunk(c, start, outcomes)
-            else:
-                parts[c] = outcomes
-            bar.update(stop - start)
+    manifest = dict(
+        scenario_name=scenario.name,
+        kind=scenario.kind,
+        scenario_sha256=hashlib.sha256(scenario.to_toml().encode()).hexdigest(),
+        seed=seed,
+        runs=runs,
+        chunk_size=chunk,
+        code_version=code_version(),
+    )
+    return StudyStore(out, manifest, resume=resume, overwrite=overwrite)
 
-        t0 = time.perf_counter()
-        try:
-            if distributed:
-                compile_s, errors, n_workers, t0 = _run_distributed(
-                    scenario, seed, todo, bounds, chunk, client, workers, finished
-                )
-                t0 += compile_s  # the workers compile first, all at once
-            else:
-                compile_s, t0 = _run_local(
-                    scenario, system, seed, todo, chunk, n_devices, max_memory_fraction, finished
-                )
-                errors, n_workers = [], None
-        except KeyboardInterrupt:
-            if store is not None:
-                kept = len(chunk_files(store.path))
-                print(
-                    f"{scenario.name}: interrupted; {kept} of {n_chunks} chunks kept in "
-                    f"{store.runs_dir} (the same command with --resume continues)",
-                    file=sys.stderr,
-                )
-            raise
-        finally:
-            bar.close()
-        wall_s = time.perf_counter() - t0
-        if errors:
-            where = f"; the other chunks are in {store.runs_dir}, --resume retries" if store else ""
-            raise StudyError(
-                f"{scenario.name}: {len(errors)} of {n_chunks} chunks raised: "
-                + "; ".join(
-                    f"chunk {e['chunk']} (runs {e['runs'][0]}..{e['runs'][1] - 1}): {e['error']}"
-                    for e in errors[:3]
-                )
-                + where,
-                errors,
-            )
-        if store is None:
-            fields = list(parts[0])
-            outcomes = {k: np.concatenate([parts[c][k] for c in range(n_chunks)]) for k in fields}
-            return Study(
-                scenario, runs, seed, outcomes, compile_s, wall_s, n_dev, chunk, workers=n_workers
-            )
-        study = Study(
-            scenario,
-            runs,
-            seed,
-            None,
-            compile_s,
-            wall_s,
-            n_dev,
-            chunk,
-            store.path,
-            workers=n_workers,
-        )
-        store.finish(study.summary(), scenario.to_toml())
-        return study
-    finally:
+
+def _run_chunks(
+    scenario, system, seed, runs, chunk, bounds, store, progress, announce, distributed,
+    n_devices, max_memory_fraction, client, workers,
+):  # fmt: skip
+    """The chunks not yet in ``store``, run locally or on Dask workers with a progress bar;
+    each finished chunk goes to ``store`` (else into the returned ``parts``). Returns
+    ``(parts, compile_s, wall_s, workers)``; :class:`StudyError` if chunks raised."""
+    n_chunks = len(bounds)
+    todo = [c for c in range(n_chunks) if store is None or not store.valid_chunk(c, *bounds[c])]
+    show = (
+        progress if progress is not None else (n_chunks > 1 and (sys.stderr.isatty() or announce))
+    )
+    bar = tqdm(
+        total=runs,
+        initial=sum(bounds[c][1] - bounds[c][0] for c in range(n_chunks) if c not in todo),
+        desc=scenario.name,
+        unit="run",
+        disable=not show,
+    )
+    parts: dict[int, dict] = {}
+
+    def finished(c, outcomes):
+        start, stop = bounds[c]
+        outcomes = {k: np.asarray(v)[: stop - start] for k, v in outcomes.items()}
+        _nan_to_status(outcomes)
         if store is not None:
-            store.close()
+            store.write_chunk(c, start, outcomes)
+        else:
+            parts[c] = outcomes
+        bar.update(stop - start)
+
+    t0 = time.perf_counter()
+    try:
+        if distributed:
+            compile_s, errors, n_workers, t0 = _run_distributed(
+                scenario, seed, todo, bounds, chunk, client, workers, finished
+            )
+            t0 += compile_s  # the workers compile first, all at once
+        else:
+            compile_s, t0 = _run_local(
+                scenario, system, seed, todo, chunk, n_devices, max_memory_fraction, finished
+            )
+            errors, n_workers = [], None
+    except KeyboardInterrupt:
+        if store is not None:
+            kept = len(chunk_files(store.path))
+            print(
+                f"{scenario.name}: interrupted; {kept} of {n_chunks} chunks kept in "
+                f"{store.runs_dir} (the same command with --resume continues)",
+                file=sys.stderr,
+            )
+        raise
+    finally:
+        bar.close()
+    wall_s = time.perf_counter() - t0
+    if errors:
+        where = f"; the other chunks are in {store.runs_dir}, --resume retries" if store else ""
+        raise StudyError(
+            f"{scenario.name}: {len(errors)} of {n_chunks} chunks raised: "
+            + "; ".join(
+                f"chunk {e['chunk']} (runs {e['runs'][0]}..{e['runs'][1] - 1}): {e['error']}"
+                for e in errors[:3]
+            )
+            + where,
+            errors,
+        )
+    return parts, compile_s, wall_s, n_workers
 
 
 class StudyError(RuntimeError):

@@ -59,7 +59,7 @@ def test_objective_gradient_matches_central_differences_of_a_per_run_loop(gradie
     scenario = toy()
     objective = parse_objective("miss_rms+0.5*dv_mean", scenario)
     (gain,) = resolve_gains(scenario, ["guidance.pn.n"])
-    problem = tune_module._Problem(scenario, [gain], objective, seed=3)
+    problem = tune_module.TuningProblem(scenario, [gain], objective, seed=3)
     idx, valid = problem.padded(train_indices(0, 6, 6))
     n0 = float(scenario["guidance.pn.n"])
     theta = jnp.asarray(problem.param.theta([n0]))
@@ -111,8 +111,9 @@ def test_training_and_heldout_runs_never_overlap(monkeypatch):
 
         return wrapped
 
-    monkeypatch.setattr(tune_module, "train_indices", spy("train", train_indices))
-    monkeypatch.setattr(tune_module, "heldout_indices", spy("heldout", heldout_indices))
+    for module in (tune_module.optimisers, tune_module.evaluation):
+        monkeypatch.setattr(module, "heldout_indices", spy("heldout", heldout_indices))
+    monkeypatch.setattr(tune_module.optimisers, "train_indices", spy("train", train_indices))
     result = tune(toy(), "guidance.pn.n", "miss_rms", batch=4, steps=3, heldout_runs=10)
     assert seen["train"] == set(range(12))
     assert seen["heldout"] == set(range(HELDOUT_OFFSET, HELDOUT_OFFSET + 10))
@@ -226,7 +227,7 @@ def test_bad_tune_input_is_one_line_before_compilation(
     def no_compile(*a, **k):
         raise AssertionError("compiled despite bad input")
 
-    monkeypatch.setattr(tune_module, "batch_function", no_compile)
+    monkeypatch.setattr(tune_module.problem, "batch_function", no_compile)
     code = cli.main(["tune", TOY, "--out", str(tmp_path), *args])
     err = capsys.readouterr().err.strip()
     assert code == 2, err

@@ -1,0 +1,223 @@
+"""The subcommands, one function each: ``args`` in, exit code out."""
+
+import sys
+
+from .exit_codes import EXIT_FAILED_RUNS
+from .output import _print_summary, _print_warnings, _too_many_failed
+
+
+def _writable_dir(path) -> None:
+    """Create ``path`` (and its parents) and check that files can be written in it, before
+    any work is spent; raise :class:`~gnc_jax.scenario.ScenarioError` naming it otherwise."""
+    import pathlib
+    import tempfile
+
+    from ..scenario import ScenarioError
+
+    try:
+        out = pathlib.Path(path)
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as e:
+        raise ScenarioError(
+            f"--out {path}: cannot create or write there ({e.strerror or e}); allowed: a "
+            "directory that can be created and written"
+        ) from None
+
+
+def _connect(address: str):
+    """A Dask client of the scheduler at ``address``, or one line saying why not."""
+    from ..scenario import ScenarioError
+
+    try:
+        from dask.distributed import Client
+    except ImportError:
+        raise ScenarioError(
+            "--scheduler: needs dask.distributed; allowed: pip install 'gnc_jax[cluster]'"
+        ) from None
+    try:
+        return Client(address, timeout=10)
+    except (OSError, TimeoutError, ValueError) as e:
+        raise ScenarioError(
+            f"--scheduler {address}: cannot connect ({type(e).__name__}: {e}); allowed: the "
+            "address of a running Dask scheduler, e.g. tcp://host:8786"
+        ) from None
+
+
+def cmd_list(args) -> int:
+    from ..scenario import list_scenarios
+    from ..systems import systems
+
+    if args.fields:
+        for kind, system in systems().items():
+            print(f"[{kind}]  {system.description}")
+            for section, fields in system.schema().items():
+                for name, f in fields.items():
+                    print(
+                        f"  {section}.{name} = {f.default!r}   # {f.allowed()}"
+                        + (f"; {f.doc}" if f.doc else "")
+                    )
+        return 0
+    scenarios = list_scenarios()
+    width = max(len(s.name) for s in scenarios)
+    print(f"{'scenario':<{width}}  {'kind':<9} {'runs':>5}  description")
+    for s in scenarios:
+        print(f"{s.name:<{width}}  {s.kind:<9} {s.runs:>5}  {s.description}")
+    return 0
+
+
+def cmd_run(args) -> int:
+    from ..scenario import ScenarioError, load_scenario
+    from ..study import run_study
+
+    scenario = load_scenario(args.scenario, overrides=args.set or ())
+    if args.out:
+        _writable_dir(args.out)
+    elif args.resume or args.overwrite:
+        raise ScenarioError("--resume/--overwrite: no --out DIR; allowed: with --out DIR")
+    _print_warnings(scenario)
+    client = None
+    if args.scheduler:
+        client = _connect(args.scheduler)
+    try:
+        study = run_study(
+            scenario,
+            runs=args.runs,
+            seed=args.seed,
+            chunk_size=args.chunk_size,
+            progress=False if args.no_progress else None,
+            max_hours=args.max_hours,
+            out=args.out,
+            resume=args.resume,
+            overwrite=args.overwrite,
+            client=client,
+            workers=args.workers,
+        )
+    finally:
+        if client is not None:
+            client.close()
+    summary = study.summary()
+    print(
+        f"{scenario.name}: {study.runs} runs, compile {study.compile_s:.1f} s, "
+        f"study {study.wall_s:.2f} s on {study.n_devices} devices"
+    )
+    _print_summary(summary)
+    if args.set:
+        print("  (modified by --set: the paper's numbers are for the packaged scenario)")
+    if args.out:
+        print(f"wrote {args.out}/summary.json, {args.out}/runs/ ({study.runs} runs), scenario.toml")
+    if _too_many_failed(summary, args.max_failed):
+        print(
+            f"gnc-jax: {summary['failed']} of {summary['runs']} runs failed "
+            f"({summary['failed_by_status']}), more than --max-failed {args.max_failed:g}",
+            file=sys.stderr,
+        )
+        return EXIT_FAILED_RUNS
+    return 0
+
+
+def cmd_reproduce(args) -> int:
+    from ..reproduction import reproduce
+    from ..scenario import ScenarioError, packaged_names
+
+    unknown = sorted(set(args.only or ()) - set(packaged_names()))
+    if unknown:
+        raise ScenarioError(
+            f"--only {unknown[0]}: unknown scenario; allowed: {', '.join(packaged_names())}"
+        )
+    _writable_dir(args.out)
+
+    summaries = reproduce(
+        args.out,
+        runs=args.runs,
+        only=args.only,
+        progress=False if args.no_progress else None,
+        max_hours=args.max_hours,
+    )
+    print(f"wrote {args.out}/reproduce.md")
+    bad = [s for s in summaries if _too_many_failed(s, args.max_failed)]
+    if bad:
+        names = ", ".join(f"{s['scenario']} ({s['failed']}/{s['runs']})" for s in bad)
+        print(
+            f"gnc-jax: failed runs above --max-failed {args.max_failed:g}: {names}", file=sys.stderr
+        )
+        return EXIT_FAILED_RUNS
+    return 0
+
+
+def cmd_envelope(args) -> int:
+    from ..operating_envelope import envelope
+    from ..scenario import load_scenario
+
+    scenario = load_scenario(args.scenario, overrides=args.set or ())
+    _writable_dir(args.out)
+    _print_warnings(scenario)
+    options = {} if args.load_limit_g is None else {"load_limit_g": args.load_limit_g}
+    client = None
+    if args.scheduler:
+        client = _connect(args.scheduler)
+    elif args.workers:
+        from ..montecarlo import local_cluster
+
+        client = local_cluster(args.workers)
+    try:
+        env = envelope(
+            scenario,
+            args.grid,
+            runs=args.runs,
+            seed=args.seed,
+            out=args.out,
+            progress=True,
+            client=client,
+            **options,
+        )
+    finally:
+        if client is not None:
+            cluster = client.cluster if args.workers else None
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    print(f"wrote {args.out}/cells.parquet and {len(env.metrics)} heat maps")
+    return 0
+
+
+def cmd_report(args) -> int:
+    from ..report import report
+
+    for path in report(args.dir, args.out):
+        print(f"wrote {path}")
+    return 0
+
+
+def cmd_tune(args) -> int:
+    from ..scenario import load_scenario
+    from ..tuning import progress_line, tune
+
+    scenario = load_scenario(args.scenario, overrides=args.set or ())
+    _writable_dir(args.out)
+    names = [n.strip() for n in args.params.split(",") if n.strip()]
+    result = tune(
+        scenario,
+        names,
+        args.objective,
+        batch=args.batch,
+        steps=args.steps,
+        seed=args.seed,
+        method=args.method,
+        learning_rate=args.learning_rate,
+        heldout_runs=args.heldout,
+        eval_every=args.eval_every,
+        eval_runs=args.eval_runs,
+        callback=lambda rec: print(progress_line(rec, names), flush=True),
+    )
+    print(
+        f"{scenario.name}: {args.method}, {args.steps} steps of {args.batch} runs, compile "
+        f"{result.compile_s:.1f} s, training {result.wall_s:.1f} s"
+    )
+    for name, a, b in zip(names, result.initial, result.tuned, strict=True):
+        print(f"  {name}: {a:.6g} -> {b:.6g}")
+    print(result.table())
+    paths = result.save(args.out)
+    print("wrote " + ", ".join(paths.values()))
+    return 0

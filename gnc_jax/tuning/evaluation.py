@@ -1,0 +1,133 @@
+"""Evaluation with the hard logic: the objective of given gains on given runs, and the
+paired held-out comparison of initial and tuned gains with its bootstrap interval."""
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..scenario import Scenario, load_scenario
+from .objectives import _term_label, parse_objective
+from .parametrisation import resolve_gains
+from .problem import TuningProblem, heldout_indices
+
+
+def _hard_objective(problem, gains, indices) -> float:
+    idx, valid = problem.padded(indices)
+    fn = problem.jitted("hard", lambda: problem.hard)
+    return float(fn(problem.args, jnp.asarray(gains), idx, valid)[0])
+
+
+def hard_objectives(scenario, params, objective, gains, runs: int, seed: int = 0) -> list[float]:
+    """The hard objective of each gain vector of ``gains`` (file units) on the same ``runs``
+    held-out runs: a grid check, a sweep or a baseline on the runs :func:`tune` holds out."""
+    if not isinstance(scenario, Scenario):
+        scenario = load_scenario(scenario)
+    resolved = resolve_gains(scenario, params)
+    problem = TuningProblem(scenario, resolved, parse_objective(objective, scenario), seed)
+    return [_hard_objective(problem, g, heldout_indices(runs)) for g in gains]
+
+
+def paired_interval(stat_a, stat_b, n, confidence=0.95, resamples=1000, seed=0):
+    """``(difference, lo, hi)`` of ``stat_b - stat_a`` over ``n`` paired runs: the difference on
+    all runs and its percentile-bootstrap confidence interval, each resample drawing the same
+    runs for both sides (``stat_x(indices)`` evaluates a statistic on a subset of the runs)."""
+    rng = np.random.default_rng(seed)
+    draws = rng.integers(0, n, size=(resamples, n))
+    diffs = np.array([stat_b(d) - stat_a(d) for d in draws])
+    q = (1.0 - confidence) / 2.0
+    lo, hi = np.quantile(diffs, [q, 1.0 - q])
+    every = np.arange(n)
+    return float(stat_b(every) - stat_a(every)), float(lo), float(hi)
+
+
+def evaluate_heldout(
+    problem: TuningProblem,
+    initial,
+    tuned,
+    runs: int,
+    chunk: int | None = None,
+    confidence: float = 0.95,
+) -> dict[str, Any]:
+    """Initial vs tuned gains (file units) on the same ``runs`` held-out runs, hard logic.
+
+    Rows: the objective and each of its terms, with the paired difference (tuned - initial)
+    and its bootstrap confidence interval over the runs that end ``ok`` with both gains.
+    """
+    indices = heldout_indices(runs)
+    chunk = min(chunk or (problem.system.chunk_per_device or 512) * problem.n_dev, runs)
+    sides = {}
+    for side, gains in (("initial", initial), ("tuned", tuned)):
+        parts = []
+        for start in range(0, runs, chunk):
+            real = indices[start : start + chunk]
+            idx, _ = problem.padded(real, size=chunk)  # one compiled shape
+            out = problem.hard_outcomes(np.asarray(gains), idx)
+            n = len(real)
+            parts.append(jax.tree_util.tree_map(lambda x, n=n: np.asarray(x)[:n], out))
+        sides[side] = jax.tree_util.tree_map(lambda *xs: np.concatenate(xs), *parts)
+    w = {s: np.asarray(problem.weights(o, jnp.ones(runs))) for s, o in sides.items()}
+    both = np.flatnonzero((w["initial"] > 0) & (w["tuned"] > 0))
+    objective = problem.objective
+
+    def statistic(outcomes, name):
+        paired = jax.tree_util.tree_map(lambda x: x[both], outcomes)
+
+        def stat(i):
+            sub = jax.tree_util.tree_map(lambda x: x[i], paired)
+            if name == "objective":
+                return float(objective.value(sub, jnp.ones(len(i)), None))
+            return objective.term_values(sub, jnp.ones(len(i)))[name]
+
+        return stat
+
+    names = ["objective"]
+    if objective.fn is None and len(objective.terms) > 1:
+        names += [_term_label(n, arg) for _, n, arg in objective.terms]
+    rows = []
+    for name in names:
+        a, b = statistic(sides["initial"], name), statistic(sides["tuned"], name)
+        every = np.arange(len(both))
+        ini, tun = a(every), b(every)
+        diff, lo, hi = paired_interval(a, b, len(both), confidence)
+        rows.append(
+            dict(
+                metric=name,
+                initial=ini,
+                tuned=tun,
+                difference=diff,
+                ci_low=lo,
+                ci_high=hi,
+                relative=diff / abs(ini) if ini else float("nan"),
+            )
+        )
+    return dict(
+        runs=runs,
+        paired_runs=len(both),
+        failed={s: int(runs - (w[s] > 0).sum()) for s in sides},
+        confidence=confidence,
+        first_index=int(indices[0]),
+        rows=rows,
+        outcomes=sides,
+    )
+
+
+def heldout_table(heldout: dict) -> str:
+    """The held-out table as text."""
+    pct = round(100 * heldout["confidence"])
+    lines = [
+        f"held-out: {heldout['paired_runs']} paired runs (indices from {heldout['first_index']}),"
+        f" hard logic; failed initial {heldout['failed']['initial']}, tuned "
+        f"{heldout['failed']['tuned']}",
+        f"  {'metric':<22} {'initial':>12} {'tuned':>12} {'tuned-initial':>14} "
+        f"{f'{pct} % CI':>26} {'change':>8}",
+    ]
+    for r in heldout["rows"]:
+        ci = f"[{r['ci_low']:.4g}, {r['ci_high']:.4g}]"
+        lines.append(
+            f"  {r['metric']:<22} {r['initial']:>12.5g} {r['tuned']:>12.5g} "
+            f"{r['difference']:>14.4g} {ci:>26} "
+            f"{100 * r['relative']:>7.2f}%"
+        )
+    return "\n".join(lines)

@@ -1,0 +1,216 @@
+"""Tuning objectives: the built-in terms (:data:`TERMS`), their weighted sums and user
+callables, hard and smooth (:class:`Objective`, :func:`parse_objective`)."""
+
+import dataclasses
+import re
+from collections.abc import Callable, Sequence
+
+import jax
+import jax.numpy as jnp
+
+from ..scenario import Scenario, ScenarioError
+from ..systems.base import AbstractSystem
+
+
+def _wmean(x, w):
+    return jnp.sum(jnp.where(w > 0, x, 0.0) * w) / jnp.maximum(jnp.sum(w), 1.0)
+
+
+def _miss_rms(out, w, arg, t):
+    return jnp.sqrt(_wmean(out.miss_m**2, w))
+
+
+def _dv_mean(out, w, arg, t):
+    return _wmean(out.dv_mps, w)
+
+
+def _chute_rms(out, w, arg, t):
+    return jnp.sqrt(_wmean(out.downrange_err_km**2 + out.crossrange_err_km**2, w))
+
+
+def _impact_distance(out):
+    # the B-plane point relative to the target's centre where the outcome has it (impactor:
+    # the miss is from the aim point), else the miss itself (intercept: aimed at the centre)
+    if hasattr(out, "b_t_m"):
+        return jnp.sqrt(out.b_t_m**2 + out.b_r_m**2)
+    return out.miss_m
+
+
+def _hit_probability(out, w, radius, t):
+    """1 - P(hit): the fraction of runs whose impact point lies outside ``radius``; smooth: a
+    logistic of width ``t x radius``."""
+    d = _impact_distance(out)
+    if t is None:
+        return 1.0 - _wmean((d <= radius).astype(float), w)
+    return 1.0 - _wmean(jax.nn.sigmoid((radius - d) / (t * radius)), w)
+
+
+def _peak_load(out, w, limit, t):
+    """Mean excess of the peak load over ``limit`` (g); smooth: a softplus of width t x limit."""
+    excess = out.load_peak_g - limit
+    if t is None:
+        return _wmean(jnp.maximum(excess, 0.0), w)
+    width = t * limit
+    return _wmean(width * jax.nn.softplus(excess / width), w)
+
+
+@dataclasses.dataclass(frozen=True)
+class ObjectiveTerm:
+    """A built-in objective term: ``fn(outcomes, weights, arg, temperature)`` (temperature
+    ``None``: the hard value), the outcome fields it reads, and what its argument means."""
+
+    fn: Callable
+    fields: tuple[str, ...]
+    doc: str
+    arg: str = ""  # meaning of the argument in name(arg); "" = none
+
+
+TERMS: dict[str, ObjectiveTerm] = {
+    "miss_rms": ObjectiveTerm(_miss_rms, ("miss_m",), "RMS of the miss, m"),
+    "dv_mean": ObjectiveTerm(_dv_mean, ("dv_mps",), "mean Δv, m/s"),
+    "hit_probability": ObjectiveTerm(
+        _hit_probability,
+        ("miss_m",),
+        "1 - P(impact within the target's radius)",
+        arg="target radius in m (default: the scenario's target size)",
+    ),
+    "chute_rms": ObjectiveTerm(
+        _chute_rms,
+        ("downrange_err_km", "crossrange_err_km"),
+        "RMS of the chute-deploy error, km",
+    ),
+    "peak_load": ObjectiveTerm(
+        _peak_load, ("load_peak_g",), "mean excess of the peak load over a limit, g", "limit in g"
+    ),
+}
+"""Built-in objective terms by name: a weighted sum of them is written ``"miss_rms+10*dv_mean"``
+(``peak_load(8)``, ``hit_probability(300)`` take an argument)."""
+
+_TERM_RE = re.compile(r"^\s*(?:([0-9.eE+-]+)\s*\*\s*)?([a-z_]+)\s*(?:\(\s*([^)]*)\s*\))?\s*$")
+
+
+def _allowed_objectives() -> str:
+    return (
+        ", ".join(f"{n}({t.arg.split(' ')[0]})" if t.arg else n for n, t in TERMS.items())
+        + ", weighted sums such as 'miss_rms+10*dv_mean', or a callable(outcomes, weights)"
+    )
+
+
+def _target_radius_m(scenario: Scenario) -> float | None:
+    target = scenario.config.get("target", {})
+    if "target_radius_m" in target:
+        return float(target["target_radius_m"])
+    if "semi_axes_km" in target:
+        return 1e3 * float(min(target["semi_axes_km"]))
+    return None
+
+
+@dataclasses.dataclass(frozen=True)
+class Objective:
+    """A tuning objective: a weighted sum of built-in terms, or a user callable.
+
+    ``value(outcomes, weights, temperature)`` is the smooth objective at ``temperature`` and the
+    hard one for ``temperature=None``; ``weights`` is 1 for the runs that count (status ``ok``)
+    and 0 for the others. A user callable ``fn(outcomes, weights)`` is used for both.
+    """
+
+    spec: str
+    terms: tuple[tuple[float, str, float | None], ...] = ()  # (weight, name, argument)
+    fn: Callable | None = None
+
+    @property
+    def structure(self):
+        """What compiled code depends on: the terms and their arguments, not their weights
+        (an argument of the compiled functions: a sweep over weights compiles once)."""
+        return tuple((name, arg) for _, name, arg in self.terms), self.fn
+
+    @property
+    def weights(self):
+        return jnp.asarray([w for w, _, _ in self.terms], dtype=jnp.float64)
+
+    def value(self, outcomes, weights, temperature=None, term_weights=None):
+        if self.fn is not None:
+            return self.fn(outcomes, weights)
+        term_weights = self.weights if term_weights is None else term_weights
+        return sum(
+            term_weights[i] * TERMS[name].fn(outcomes, weights, arg, temperature)
+            for i, (_, name, arg) in enumerate(self.terms)
+        )
+
+    def term_values(self, outcomes, weights) -> dict[str, float]:
+        """The hard value of each term (for the held-out table)."""
+        return {
+            _term_label(name, arg): float(TERMS[name].fn(outcomes, weights, arg, None))
+            for _, name, arg in self.terms
+        }
+
+    @property
+    def fields(self) -> tuple[str, ...]:
+        return tuple(f for _, name, _ in self.terms for f in TERMS[name].fields)
+
+
+def _term_label(name, arg):
+    return name if arg is None else f"{name}({arg:g})"
+
+
+def parse_objective(objective, scenario: Scenario) -> Objective:
+    """An :class:`Objective` from a spec string (``"miss_rms+10*dv_mean"``), a mapping
+    ``{term: weight}``, a callable ``fn(outcomes, weights)``, or ``None`` (the system's
+    ``smooth_objective``, hard and smooth alike). Raises :class:`ScenarioError` naming the bad
+    term."""
+    if callable(objective):
+        return Objective(getattr(objective, "__name__", "callable"), fn=objective)
+    if objective is None:
+        system = scenario.system
+        if type(system).smooth_objective is AbstractSystem.smooth_objective:
+            raise ScenarioError(
+                f"objective: none given and {system.name} has no smooth_objective; allowed: "
+                f"{_allowed_objectives()}"
+            )
+        return Objective(
+            f"{system.name}.smooth_objective", fn=lambda out, w: system.smooth_objective(out)
+        )
+    if isinstance(objective, dict):
+        objective = "+".join(f"{w!r}*{n}" for n, w in objective.items())
+    if not isinstance(objective, str) or not objective.strip():
+        raise ScenarioError(f"objective: {objective!r}; allowed: {_allowed_objectives()}")
+    terms = []
+    for part in objective.split("+"):
+        m = _TERM_RE.match(part)
+        name = m.group(2) if m else part.strip()
+        if m is None or name not in TERMS:
+            raise ScenarioError(
+                f"objective: {part.strip()!r} in {objective!r}; allowed: {_allowed_objectives()}"
+            )
+        try:
+            weight = float(m.group(1)) if m.group(1) else 1.0
+            arg = float(m.group(3)) if m.group(3) else None
+        except ValueError:
+            raise ScenarioError(
+                f"objective: {part.strip()!r}: not a number; allowed: {_allowed_objectives()}"
+            ) from None
+        term = TERMS[name]
+        if name == "hit_probability" and arg is None:
+            arg = _target_radius_m(scenario)
+            if arg is None:
+                raise ScenarioError(
+                    f"objective: hit_probability: scenario {scenario.name} has no target size;"
+                    " allowed: hit_probability(RADIUS_M)"
+                )
+        if term.arg and arg is None:
+            raise ScenarioError(f"objective: {name} needs an argument; allowed: {name}({term.arg})")
+        if not term.arg and arg is not None:
+            raise ScenarioError(f"objective: {name} takes no argument; allowed: {name}")
+        terms.append((weight, name, arg))
+    return Objective(objective.replace(" ", ""), tuple(terms))
+
+
+def _check_fields(objective: Objective, outcome_fields: Sequence[str], kind: str) -> None:
+    for f in objective.fields:
+        if f not in outcome_fields:
+            name = next(n for _, n, _ in objective.terms if f in TERMS[n].fields)
+            usable = [n for n, t in TERMS.items() if all(x in outcome_fields for x in t.fields)]
+            raise ScenarioError(
+                f"objective: {name} needs the outcome {f!r}, which a {kind} run does not have;"
+                f" allowed for {kind}: {', '.join(usable)}"
+            )

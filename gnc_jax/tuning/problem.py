@@ -1,0 +1,157 @@
+"""The tuning problem, built once (:class:`TuningProblem`), and the run indices it flies.
+
+**Run indices.** Run ``i`` uses ``fold_in(key(seed), i)`` as in every study. Training step
+``s`` flies runs ``(s * batch + j) mod train_runs`` (default ``train_runs = batch * steps``: a
+fresh batch each step); held-out runs are ``HELDOUT_OFFSET + j``, and ``train_runs <=
+HELDOUT_OFFSET`` is enforced, so the two sets never share a run.
+"""
+
+import dataclasses
+import functools
+import time
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._status import Status
+from ..montecarlo import batch_function, build
+from ..params import declared_params
+from ..scenario import Scenario
+from .objectives import _check_fields
+from .parametrisation import Gain, Reparametrisation
+
+HELDOUT_OFFSET = 2**30
+"""First run index of the held-out set; training indices stay below it."""
+
+
+def _si_factors(scenario: Scenario, gains: list[Gain], law) -> list[float]:
+    """SI leaf / file value of each gain (all conversions of tunable gains are linear)."""
+    out = []
+    for g in gains:
+        file_value = float(scenario[g.name])
+        si = float(getattr(law, g.attribute))
+        out.append(si / file_value)
+    return out
+
+
+@functools.lru_cache(maxsize=16)
+def _batch_function(system):
+    return batch_function(system)
+
+
+class TuningProblem:
+    """What one tuning needs, built once: the built scenario (``sim``, ``law``), the gains <->
+    law map and the objective. Its jitted functions take ``sim`` and ``law`` as arguments and
+    are cached on the problem's static structure (:meth:`jitted`), so a second tuning of the
+    same structure (another seed, other weights, other start values) does not recompile."""
+
+    def __init__(self, scenario, gains, objective, seed):
+        self.scenario, self.system, self.seed = scenario, scenario.system, seed
+        self.sim, self.law = build(scenario)
+        self.gains = tuple(
+            dataclasses.replace(g, si_per_file=f)
+            for g, f in zip(gains, _si_factors(scenario, gains, self.law), strict=True)
+        )
+        self.param = Reparametrisation.of(scenario, gains)
+        self.objective = objective
+        if objective.fn is None:  # traced, not compiled: bad input stops before compilation
+            outcome = jax.eval_shape(
+                lambda: self.system.simulate(self.sim, self.law, jax.random.key(0))[0]
+            )
+            _check_fields(objective, outcome._fields, self.system.name)
+        self.fn, self.n_dev = _batch_function(self.system)
+        self.seed_arr = jnp.asarray(seed, dtype=jnp.uint32)
+        self.term_weights = objective.weights
+        spec = declared_params(type(self.law)).get("temperature")
+        self.law_temperature = (
+            float(self.law.temperature) if spec is not None and not spec.static else None
+        )
+
+    @property
+    def args(self):
+        """The dynamic arguments of every jitted function: built scenario, law, seed, weights."""
+        return self.sim, self.law, self.seed_arr, self.term_weights
+
+    def jitted(self, kind: str, build_fn):
+        key = (kind, self.system, self.objective.structure, self.param, self.gains, self.n_dev)
+        if key not in _JITTED:
+            if len(_JITTED) >= 32:
+                _JITTED.pop(next(iter(_JITTED)))
+            _JITTED[key] = jax.jit(build_fn())
+        return _JITTED[key]
+
+    def compiled(self, kind: str, build_fn, *args):
+        """``(executable, compile_s)``: :meth:`jitted` compiled ahead of time for ``args``
+        (reused for arguments of the same structure, shapes and dtypes; 0 s then)."""
+        leaves, treedef = jax.tree_util.tree_flatten(args)
+        shapes = tuple((jnp.shape(x), jnp.result_type(x)) for x in leaves)
+        key = (kind, self.system, self.objective.structure, self.param, self.gains, treedef, shapes)
+        if key in _COMPILED:
+            return _COMPILED[key], 0.0
+        t0 = time.perf_counter()
+        executable = self.jitted(kind, build_fn).lower(*args).compile()
+        if len(_COMPILED) >= 32:
+            _COMPILED.pop(next(iter(_COMPILED)))
+        _COMPILED[key] = executable
+        return executable, time.perf_counter() - t0
+
+    def law_at(self, law, gains_file):
+        values = tuple(
+            jnp.asarray(gains_file[i] * g.si_per_file, dtype=jnp.float64)
+            for i, g in enumerate(self.gains)
+        )
+        return eqx.tree_at(
+            lambda l: tuple(getattr(l, g.attribute) for g in self.gains), law, values
+        )
+
+    def padded(self, indices, size: int | None = None):
+        """Indices padded to ``size`` (default: a whole number per device) by repeating them,
+        and the weights of the real ones (1) and the padding (0)."""
+        indices = np.asarray(indices, dtype=np.int64)
+        n = -(-max(size or 0, len(indices)) // self.n_dev) * self.n_dev
+        valid = np.arange(n) < len(indices)
+        return jnp.asarray(np.resize(indices, n), dtype=jnp.int32), jnp.asarray(valid, float)
+
+    @staticmethod
+    def weights(outcomes, valid):
+        # as run_study: a run with a non-finite float outcome is a failed (``nan``) run
+        ok = outcomes.status == Status.ok
+        finite = jnp.ones_like(valid, dtype=bool)
+        for x in outcomes:
+            if jnp.issubdtype(x.dtype, jnp.floating):
+                finite &= jnp.isfinite(x).reshape(x.shape[0], -1).all(axis=1)
+        return jnp.where(ok & finite, valid, 0.0)
+
+    def smooth(self, args, theta, temperature, indices, valid):
+        """The relaxed objective at ``theta`` on runs ``indices`` (pure in its arguments)."""
+        sim, law, seed, term_weights = args
+        law = law.relax(temperature) if temperature is not None else law.relax()
+        out = self.fn(sim, self.law_at(law, self.param.gains(theta)), seed, indices)
+        return self.objective.value(out, self.weights(out, valid), temperature, term_weights)
+
+    def hard(self, args, gains_file, indices, valid):
+        """``(objective, outcomes)`` of the hard logic with gains ``gains_file``."""
+        sim, law, seed, term_weights = args
+        out = self.fn(sim, self.law_at(law, gains_file), seed, indices)
+        value = self.objective.value(out, self.weights(out, valid), None, term_weights)
+        return value, out
+
+    def hard_outcomes(self, gains_file, indices):
+        fn = self.jitted("hard", lambda: self.hard)
+        return fn(self.args, jnp.asarray(gains_file), indices, jnp.ones(len(indices)))[1]
+
+
+_JITTED: dict = {}
+_COMPILED: dict = {}
+
+
+def train_indices(step: int, batch: int, train_runs: int) -> np.ndarray:
+    """Run indices of training step ``step``: ``(step * batch + j) mod train_runs``."""
+    return (step * batch + np.arange(batch)) % train_runs
+
+
+def heldout_indices(runs: int) -> np.ndarray:
+    """Run indices of the held-out set: ``HELDOUT_OFFSET + j``."""
+    return HELDOUT_OFFSET + np.arange(runs, dtype=np.int64)

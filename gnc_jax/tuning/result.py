@@ -1,0 +1,136 @@
+"""What :func:`~gnc_jax.tuning.tune` returns (:class:`TuneResult`): the tuned scenario,
+the training history, the held-out table, and the files and figure it writes."""
+
+import dataclasses
+import json
+import pathlib
+from typing import Any
+
+from ..scenario import Scenario
+from .evaluation import heldout_table
+
+
+@dataclasses.dataclass
+class TuneResult:
+    """What :func:`tune` returns.
+
+    Attributes:
+        scenario: the scenario as given; tuned_scenario: the same with the tuned gains.
+        names: the tuned gains' scenario names; initial, tuned: their values (file units).
+        objective: the objective's spec; method: ``"adam"`` or ``"es"``.
+        history: one dict per step: ``step``, ``objective`` (training batch; smooth for adam,
+            hard for es), ``gains``, ``temperature``, ``runs`` (simulated so far), ``wall_s``
+            (after compilation, evaluations excluded), and ``heldout`` where evaluated.
+        heldout: the paired held-out evaluation (:func:`evaluate_heldout`), or ``None``.
+        training_check: the hard objective on the first ``runs`` training runs of the start
+            (``initial``), the last step (``last``) and the result (``tuned``, at
+            ``selected_step``; -1: the start): a relaxation that misled the tuner shows there,
+            without looking at the held-out runs (``None`` when ``check_runs=0``).
+        compile_s, wall_s: compilation and training wall time.
+    """
+
+    scenario: Scenario
+    tuned_scenario: Scenario
+    names: list[str]
+    initial: list[float]
+    tuned: list[float]
+    objective: str
+    method: str
+    seed: int
+    batch: int
+    steps: int
+    history: list[dict]
+    heldout: dict | None
+    compile_s: float
+    wall_s: float
+    training_check: dict | None = None
+
+    @property
+    def tuned_gains(self) -> dict[str, float]:
+        return dict(zip(self.names, self.tuned, strict=True))
+
+    def runs_to_reach(self, target: float):
+        """``(runs, wall_s)`` at the first held-out evaluation whose objective is at most
+        ``target`` (``None`` if none reached it)."""
+        for h in self.history:
+            if h.get("heldout") is not None and h["heldout"] <= target:
+                return h["runs"], h["wall_s"]
+        return None
+
+    def table(self) -> str:
+        lines = []
+        c = self.training_check
+        if c:
+            at = "the start" if c["selected_step"] < 0 else f"step {c['selected_step']}"
+            lines.append(
+                f"training runs 0..{c['runs'] - 1}, hard logic: start {c['initial']:.5g}, last "
+                f"step {c['last']:.5g}, result ({at}) {c['tuned']:.5g}"
+            )
+        lines.append(heldout_table(self.heldout) if self.heldout else "(no held-out evaluation)")
+        return "\n".join(lines)
+
+    def summary(self) -> dict[str, Any]:
+        out = {
+            k: getattr(self, k)
+            for k in ("names", "initial", "tuned", "objective", "method", "seed", "batch")
+        }
+        out.update(steps=self.steps, compile_s=self.compile_s, wall_s=self.wall_s)
+        out["training_check"] = self.training_check
+        if self.heldout:
+            out["heldout"] = {k: v for k, v in self.heldout.items() if k != "outcomes"}
+        return out
+
+    def save(self, out_dir) -> dict[str, str]:
+        """Write ``tuned.toml`` (runnable with ``gnc-jax run``), ``training.json`` (history),
+        ``heldout.json`` and ``training.png`` into ``out_dir``."""
+        out = pathlib.Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        paths = {
+            "tuned": out / "tuned.toml",
+            "training": out / "training.json",
+            "heldout": out / "heldout.json",
+            "figure": out / "training.png",
+        }
+        paths["tuned"].write_text(self.tuned_scenario.to_toml())
+        paths["training"].write_text(json.dumps(self.history, indent=1))
+        paths["heldout"].write_text(json.dumps(self.summary(), indent=1))
+        plot_training(self, paths["figure"])
+        return {k: str(v) for k, v in paths.items()}
+
+
+def plot_training(result: TuneResult, path) -> None:
+    """``training.png``: the objective and each gain per step."""
+    from ..plotting import pyplot
+
+    plt = pyplot()
+    steps = [h["step"] for h in result.history]  # the gains and objective before its update
+    n = len(result.names)
+    fig, axes = plt.subplots(n + 1, 1, figsize=(6.4, 2.0 * (n + 1)), sharex=True)
+    axes[0].plot(steps, [h["objective"] for h in result.history], label="training batch")
+    relaxed = any(h.get("temperature") is not None for h in result.history)
+    label = "training batch" + (
+        " (relaxed)" if relaxed else " (hard)" if result.method == "es" else ""
+    )
+    axes[0].lines[0].set_label(label)
+    # a check after step s's update is of the gains plotted at s + 1
+    checks = [(h["step"] + 1, h["check"]) for h in result.history if h.get("check") is not None]
+    if result.training_check:
+        checks.insert(0, (0, result.training_check["initial"]))
+    if checks:
+        axes[0].plot(*zip(*checks, strict=True), "s", label="hard check, training runs")
+    ev = [(h["step"], h["heldout"]) for h in result.history if h.get("heldout") is not None]
+    if ev:
+        axes[0].plot(*zip(*ev, strict=True), "o-", label="held-out (hard)")
+    axes[0].legend(fontsize=8)
+    selected = (result.training_check or {}).get("selected_step")
+    if selected is not None:
+        for ax in axes:
+            ax.axvline(selected + 1, color="0.6", lw=0.8, ls="--")
+    axes[0].set_ylabel("objective")
+    axes[0].set_title(f"{result.scenario.name}: {result.objective} ({result.method})", fontsize=9)
+    for i, name in enumerate(result.names):
+        axes[i + 1].plot(steps, [h["gains"][i] for h in result.history])
+        axes[i + 1].set_ylabel(name.split(".")[-1])
+    axes[-1].set_xlabel("step")
+    fig.savefig(path, dpi=120, bbox_inches="tight")
+    plt.close(fig)

@@ -1,0 +1,186 @@
+"""``tune``: the gains of a scenario tuned on dispersed runs, from the checked arguments to
+the held-out evaluation of the result."""
+
+import dataclasses
+from collections.abc import Callable
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..scenario import Scenario, ScenarioError, load_scenario
+from .evaluation import _hard_objective, evaluate_heldout
+from .objectives import parse_objective
+from .optimisers import _run_adam, _run_es, _temperatures, default_optimizer
+from .parametrisation import resolve_gains
+from .problem import HELDOUT_OFFSET, TuningProblem
+from .result import TuneResult
+
+
+def tune(
+    scenario,
+    params,
+    objective=None,
+    *,
+    batch: int = 64,
+    steps: int = 40,
+    seed: int = 0,
+    method: str = "adam",
+    learning_rate: float = 0.1,
+    optimizer=None,
+    temperature=None,
+    train_runs: int | None = None,
+    heldout_runs: int = 1000,
+    eval_every: int = 0,
+    eval_runs: int = 256,
+    gradient: str = "forward",
+    population: int = 4,
+    sigma: float = 0.1,
+    confidence: float = 0.95,
+    check_runs: int = 256,
+    check_every: int | None = None,
+    overrides=(),
+    callback: Callable[[dict], None] | None = None,
+) -> TuneResult:
+    """Tune the gains ``params`` of ``scenario`` to minimise ``objective``.
+
+    Long only for its 22 arguments and their documentation: the steps (the checks of the
+    sizes, the tuner's loop, the selection by the training check, the held-out evaluation)
+    are functions of their own.
+
+    Args:
+        scenario: a :class:`~gnc_jax.Scenario` or a packaged name / TOML path.
+        params: scenario names of tunable leaves (a list, or comma-separated text).
+        objective: built-in terms (:data:`TERMS`, e.g. ``"miss_rms+10*dv_mean"``), a mapping
+            ``{term: weight}``, a callable ``fn(outcomes, weights)`` of the per-run outcomes
+            (a NamedTuple of arrays, run on the first axis; weights 1 for ``ok`` runs, 0
+            else), or ``None``: the system's ``smooth_objective``.
+        batch: runs per step; steps: optimiser steps; seed: root seed of the run keys.
+        method: ``"adam"`` (gradients through the relaxed laws) or ``"es"`` (gradient-free
+            antithetic evolution strategy on the hard logic, same runs per step).
+        learning_rate: of the default optimiser (:func:`default_optimizer`), in theta units
+            (log of the gains: 0.1 is a 10 % change); optimizer: any optax transformation.
+        temperature: relaxation temperature ``(start, end)`` annealed geometrically, or one
+            number; default: constant at the scenario's own ``temperature``.
+        train_runs: size of the training set of run indices (default ``batch * steps``).
+        heldout_runs: held-out runs of the final paired evaluation (0: none).
+        eval_every, eval_runs: evaluate the hard held-out objective on ``eval_runs`` held-out
+            runs every ``eval_every`` steps (0: never) for :meth:`TuneResult.runs_to_reach`.
+        gradient: ``"forward"`` (``jax.jacfwd``) or ``"reverse"`` (``jax.grad``).
+        population, sigma: antithetic pairs per generation and the perturbation in theta
+            (``method="es"``).
+        check_runs, check_every: every ``check_every`` steps (default: an eighth of the
+            steps) the hard objective of the gains on the first ``check_runs`` training runs;
+            the result is the checked gains (or the start) where it is lowest
+            (:attr:`TuneResult.training_check`); ``check_runs=0``: the last step's gains.
+        overrides: ``section.field=value`` applied to ``scenario`` first.
+        callback: called with each step's history record.
+
+    Raises:
+        ScenarioError: bad input (unknown or non-tunable gain, bad objective, bad sizes),
+            before anything is compiled.
+    """
+    if not isinstance(scenario, Scenario):
+        scenario = load_scenario(scenario, overrides=overrides)
+    elif overrides:
+        scenario = scenario.with_overrides(overrides)
+    train_runs = _checked_sizes(
+        batch, steps, seed, method, gradient, train_runs, heldout_runs, eval_every, eval_runs,
+        population, check_runs, check_every,
+    )  # fmt: skip
+    gains = resolve_gains(scenario, params)
+    objective_ = parse_objective(objective, scenario)
+    problem = TuningProblem(scenario, gains, objective_, seed)
+    names = [g.name for g in gains]
+    initial = [float(scenario[n]) for n in names]
+    theta0 = problem.param.theta(initial)
+    opt = optimizer or default_optimizer(learning_rate, steps)
+    temps = _temperatures(problem, temperature, steps)
+    run = _run_adam if method == "adam" else _run_es
+    check_indices = np.arange(min(check_runs, train_runs))
+    monitor = dict(
+        eval_every=eval_every,
+        eval_runs=eval_runs,
+        check_runs=check_runs,
+        check_every=max(steps // 8, 1) if check_every is None else check_every,
+        check_indices=check_indices,
+    )
+    history, theta, compile_s, wall_s = run(
+        problem, theta0, opt, temps, batch, steps, train_runs, gradient, population, sigma,
+        monitor, callback, seed,
+    )  # fmt: skip
+    tuned = [float(x) for x in problem.param.gains(jnp.asarray(theta))]
+    check = None
+    if check_runs:
+        check, tuned = _training_check(problem, initial, check_indices, history)
+    tuned_scenario = _with_gains(scenario, names, tuned)
+    heldout = (
+        evaluate_heldout(problem, initial, tuned, heldout_runs, confidence=confidence)
+        if heldout_runs
+        else None
+    )
+    return TuneResult(
+        scenario, tuned_scenario, names, initial, tuned, objective_.spec, method, seed, batch,
+        steps, history, heldout, compile_s, wall_s, check,
+    )  # fmt: skip
+
+
+def _checked_sizes(
+    batch, steps, seed, method, gradient, train_runs, heldout_runs, eval_every, eval_runs,
+    population, check_runs, check_every,
+) -> int:  # fmt: skip
+    """The training set's size (default ``batch * steps``) once every size, the seed, the
+    method and the gradient mode are checked; :class:`ScenarioError` naming the first bad one."""
+    for name, value, least in (
+        ("batch", batch, 1),
+        ("steps", steps, 1),
+        ("heldout_runs", heldout_runs, 0),
+        ("eval_every", eval_every, 0),
+        ("eval_runs", eval_runs, 1),
+        ("population", population, 1),
+        ("check_runs", check_runs, 0),
+        ("check_every", 1 if check_every is None else check_every, 1),
+    ):
+        if isinstance(value, bool) or not isinstance(value, int) or value < least:
+            raise ScenarioError(f"{name}: {value!r}; allowed: an integer >= {least}")
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**32:
+        raise ScenarioError(f"seed: {seed!r}; allowed: an integer in [0, 2^32)")
+    if method not in ("adam", "es"):
+        raise ScenarioError(f"method: {method!r}; allowed: adam, es")
+    if gradient not in ("forward", "reverse"):
+        raise ScenarioError(f"gradient: {gradient!r}; allowed: forward, reverse")
+    train_runs = batch * steps if train_runs is None else train_runs
+    if not 1 <= train_runs <= HELDOUT_OFFSET:
+        raise ScenarioError(
+            f"train_runs: {train_runs}; allowed: 1 .. {HELDOUT_OFFSET} (held-out indices start "
+            "there)"
+        )
+    return train_runs
+
+
+def _training_check(problem, initial, check_indices, history) -> tuple[dict, list]:
+    """``(training_check, tuned gains)``: the result is the checked point (or the start) with
+    the lowest hard objective on the check's training runs, so that a relaxation that drifts
+    late does not decide it."""
+    checked = [(_hard_objective(problem, initial, check_indices), -1, initial)]
+    checked += [(h["check"], h["step"], h["check_gains"]) for h in history if "check" in h]
+    best = min(checked, key=lambda c: c[0])
+    check = dict(
+        runs=len(check_indices),
+        initial=checked[0][0],
+        last=checked[-1][0],
+        tuned=best[0],
+        selected_step=best[1],
+    )
+    return check, list(best[2])
+
+
+def _with_gains(scenario: Scenario, names, values) -> Scenario:
+    tuned = scenario.with_overrides(dict(zip(names, values, strict=True)))
+    return dataclasses.replace(
+        tuned,
+        paper={},  # the published numbers are for the paper's gains, not these
+        name=f"{scenario.name}-tuned",
+        description=f"{scenario.description} (tuned: "
+        + ", ".join(f"{n.split('.')[-1]} = {v:.6g}" for n, v in zip(names, values, strict=True))
+        + ")",
+    )
