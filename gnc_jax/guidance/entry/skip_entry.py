@@ -38,7 +38,10 @@ This module holds the law's parameters and its ``init``/``step``; the pieces are
 name themselves: :mod:`~gnc_jax.guidance.entry.predictor`,
 :mod:`~gnc_jax.guidance.entry.corrector`, :mod:`~gnc_jax.guidance.entry.tracking`,
 :mod:`~gnc_jax.guidance.entry.phases` (phase machine and reversals) and
-:mod:`~gnc_jax.guidance.entry.state` (its state and diagnostics).
+:mod:`~gnc_jax.guidance.entry.state` (its state and diagnostics). The second-entry reference
+(:class:`~gnc_jax.guidance.entry.reference.ReferenceTrajectory`) is designed by the capsule
+system (:mod:`gnc_jax.systems.capsule.reference`) and handed to
+:meth:`SkipEntryGuidance.from_config`.
 """
 
 import math
@@ -46,7 +49,7 @@ import math
 import jax.numpy as jnp
 
 from ..._types import Scalar
-from ...dynamics.entry import G0, entry_state_from_conditions
+from ...dynamics.entry import G0
 from ...geometry.sphere import (
     along_track_to_go,
     crossrange_to_target,
@@ -382,34 +385,20 @@ class SkipEntryGuidance(AbstractEntryGuidance):
             )
 
     @classmethod
-    def from_config(cls, section, config, ctx=None):
-        """The law of a scenario, with the second-entry reference designed by
-        :mod:`gnc_jax.guidance.entry.reference_design` for ``ctx`` (the capsule simulation data: the
-        nominal vehicle, Earth, atmosphere, entry and target; cached on disk after the first
-        design). The chute altitude is the entry's (``entry.chute_altitude_km``)."""
-        from .reference_design import NominalProblem, reference_for
+    def reference_switch_load_g(cls, section) -> float:
+        """The Kepler-phase load (g) of ``section``: the reference this law tracks switches
+        where the load, having fallen below it after the pull-up, rises through it again."""
+        return section["kepler_load_g"]
 
-        e, ref = config["entry"], config["reference"]
-        chute = jnp.asarray(e["chute_altitude_km"] * 1e3, dtype=jnp.float64)
-        problem = NominalProblem(
-            model=EntryModel(ctx.vehicle, ctx.earth, ctx.atmosphere),
-            entry=entry_state_from_conditions(ctx.entry, ctx.earth),
-            target_fixed=ctx.target_fixed,
-            kepler_load_g=jnp.asarray(section["kepler_load_g"], dtype=jnp.float64),
-            chute_altitude_m=chute,
-            v_end_mps=jnp.asarray(ref["v_end_mps"], dtype=jnp.float64),
-        )
-        description = {
-            "entry": e,
-            "vehicle": config["vehicle"],
-            "atmosphere": config["atmosphere"],
-            "kepler_load_g": section["kepler_load_g"],
-            "v_end_mps": ref["v_end_mps"],
-        }
-        reference, _ = reference_for(
-            problem, description, w_margin=ref["w_margin"], steps=ref["design_steps"]
-        )
-        return from_config(cls, section, reference=reference, chute_altitude_m=chute)
+    @classmethod
+    def from_config(cls, section, config, ctx=None):
+        """The law of a scenario. ``ctx`` is the second-entry reference
+        (:class:`~gnc_jax.guidance.entry.reference.ReferenceTrajectory`) the capsule system
+        designed for this scenario's vehicle, entry and target
+        (:func:`gnc_jax.systems.capsule.reference.scenario_reference`). The chute altitude is
+        the entry's (``entry.chute_altitude_km``)."""
+        chute = jnp.asarray(config["entry"]["chute_altitude_km"] * 1e3, dtype=jnp.float64)
+        return from_config(cls, section, reference=ctx, chute_altitude_m=chute)
 
     # ---- the guidance-law protocol ----
     def init(self, nav: EntryNav, ctx: EntryGuidanceContext) -> SkipEntryState:
