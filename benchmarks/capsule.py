@@ -190,13 +190,14 @@ def predictor_step(sim, law, n, repeats):
     i = int(np.flatnonzero(trace.corrector_evals > 0)[10])
     from gnc_jax.dynamics.entry import EntryState
     from gnc_jax.guidance.entry.base import EntryModel
+    from gnc_jax.guidance.entry.predictor import predict
 
     model = EntryModel(sim.vehicle, sim.earth, sim.atmosphere)
     y = EntryState(jnp.asarray(trace.r_m[i]), jnp.asarray(trace.v_mps[i]))
     sigmas = jnp.full((n,), trace.sigma_0_rad[i])
 
     def one(sigma):
-        p = law.predict(y, trace.t_s[i], True, sigma, model, sim.target_fixed)
+        p = predict(law, y, trace.t_s[i], True, sigma, model, sim.target_fixed)
         return p.miss_m, p.steps
 
     fn, _ = _compiled(jax.vmap(one), sigmas)

@@ -10,16 +10,16 @@ throughput a vmapped batch of 1000 arcs (compile time separate, best of 3). The 
 step is chosen from this table: the corrector's tolerance is 5 km in range, so a step whose
 error is a few tens of metres costs accuracy nothing and saves evaluations.
 
-The second table is the predictor itself (``SkipEntryGuidance.predict``: the bank profile, the
-switch-point and chute location, the second-entry expansion), at the states and solutions of
-the corrector cycles of four flights: its predicted range error against a converged
-prediction (bank at every RK4 stage, 0.25 s steps), for the step schedules (``predictor_dt_s``
-/ ``predictor_coast_dt_s``, the coast steps below 0.02 g) and both bank models. With the bank
-held over each step (as the law flies it) the error is first order in the step -- about
-460 km at 8 s, a hundred times the corrector's tolerance, made up by re-solving every 4 s --
-and the coast steps add about 1 km to it; with the bank at every stage it is fourth order
-(about 3 km at 8 s) but each step costs twice as much (a cosine per stage, which XLA's CPU
-fusion recomputes in every consumer).
+The second table is the predictor itself (``gnc_jax.guidance.entry.predictor.predict``: the bank
+profile, the switch-point and chute location, the second-entry expansion), at the states and
+solutions of the corrector cycles of four flights: its predicted range error against a converged
+prediction (bank at every RK4 stage, 0.25 s steps), for the step schedules (``predictor_dt_s`` /
+``predictor_coast_dt_s``, the coast steps below 0.02 g) and both bank models. With the bank held
+over each step (as the law flies it) the error is first order in the step -- about 460 km at
+8 s, a hundred times the corrector's tolerance, made up by re-solving every 4 s -- and the coast
+steps add about 1 km to it; with the bank at every stage it is fourth order (about 3 km at 8 s)
+but each step costs twice as much (a cosine per stage, which XLA's CPU fusion recomputes in
+every consumer).
 """
 
 import dataclasses
@@ -33,6 +33,7 @@ from scipy.integrate import solve_ivp
 import gnc_jax as gj  # first: float64, host devices
 from gnc_jax.dynamics.entry import EntryState
 from gnc_jax.guidance.entry.base import EntryModel
+from gnc_jax.guidance.entry.predictor import predict
 from gnc_jax.integrate import RK4, RK6_BUTCHER, integrate_fixed
 
 T_ARC = 800.0
@@ -114,7 +115,7 @@ def prediction_errors(sim, law):
     def batch(variant):
         def one(y, t, pulled, sigma, drag_ratio, lift_ratio):
             m = EntryModel(sim.vehicle, sim.earth, sim.atmosphere, drag_ratio, lift_ratio)
-            p = variant.predict(y, t, pulled, sigma, m, sim.target_fixed)
+            p = predict(variant, y, t, pulled, sigma, m, sim.target_fixed)
             return p.miss_m, p.steps
 
         fn = jax.jit(jax.vmap(one)).lower(*args).compile()

@@ -10,8 +10,7 @@ from scipy.integrate import solve_ivp
 import gnc_jax as gj
 from gnc_jax import operating_envelope as envelope_module
 from gnc_jax.dynamics.entry import EntryState, entry_state_from_conditions
-from gnc_jax.guidance.entry import corridor
-from gnc_jax.guidance.entry import reference_design as rd
+from gnc_jax.guidance.entry import cache, corridor, design
 from gnc_jax.guidance.entry.base import EntryModel, flight_variables
 from gnc_jax.guidance.entry.corridor import (
     DT_S,
@@ -45,8 +44,8 @@ ZERO = [
 def no_design(monkeypatch, tmp_path):
     """An empty reference cache, and a reference design that fails the test if reached."""
     monkeypatch.setenv("GNC_JAX_CACHE", str(tmp_path))
-    monkeypatch.setattr(rd, "_MEMORY", {})
-    monkeypatch.setattr(rd, "design", lambda *a, **k: pytest.fail("reference design ran"))
+    monkeypatch.setattr(cache, "_MEMORY", {})
+    monkeypatch.setattr(design, "design", lambda *a, **k: pytest.fail("reference design ran"))
 
 
 def _track_range_km(u, start, azimuth, r_e_km):

@@ -11,7 +11,7 @@ import pytest
 import gnc_jax as gj
 from gnc_jax._status import Status
 from gnc_jax.dynamics.entry import entry_state_from_conditions
-from gnc_jax.guidance.entry import reference_design as rd
+from gnc_jax.guidance.entry import cache, design, nominal, reach
 from gnc_jax.guidance.entry.base import EntryModel
 from gnc_jax.systems.capsule import simulation as capsule_sim
 
@@ -21,11 +21,11 @@ def paper():
     return gj.load_scenario("lunar-skip-entry")
 
 
-def _problem(scenario) -> rd.NominalProblem:
-    """The design problem of a scenario, built the way the law builds it."""
+def _problem(scenario) -> nominal.NominalProblem:
+    """The design problem of a scenario, built the way the capsule system builds it."""
     cfg = scenario.config
     earth, vehicle, atmosphere, entry = capsule_sim._nominal(cfg)
-    return rd.NominalProblem(
+    return nominal.NominalProblem(
         model=EntryModel(vehicle, earth, atmosphere),
         entry=entry_state_from_conditions(entry, earth),
         target_fixed=capsule_sim._target(cfg, earth, entry),
@@ -45,12 +45,12 @@ def _one_line(e) -> str:
 def no_design(monkeypatch, tmp_path):
     """An empty reference cache, and a design that fails the test if it is reached."""
     monkeypatch.setenv("GNC_JAX_CACHE", str(tmp_path))
-    monkeypatch.setattr(rd, "_MEMORY", {})
+    monkeypatch.setattr(cache, "_MEMORY", {})
 
-    def design(*args, **kwargs):
+    def refuse(*args, **kwargs):
         raise AssertionError("the reference design ran for an input that must be refused")
 
-    monkeypatch.setattr(rd, "design", design)
+    monkeypatch.setattr(design, "design", refuse)
 
 
 @pytest.mark.parametrize(
@@ -74,7 +74,7 @@ def test_entry_above_the_skip_out_altitude_is_refused(paper):
 
 def _design_banks_deg(step_deg):
     """The design's first-entry banks (its bounds) every ``step_deg``."""
-    lo, hi = np.degrees(rd.SIGMA_1_BOUNDS_RAD)
+    lo, hi = np.degrees(nominal.SIGMA_1_BOUNDS_RAD)
     return np.arange(lo, hi + 0.01, step_deg)
 
 
@@ -84,9 +84,9 @@ def _landed_ranges_km(problem, range_km, sigma_1_deg, sigma_2_deg):
 
     @jax.jit
     def fly(s1, s2):
-        f = rd.fly_nominal(problem, s1, s2, s2, rd.V_SWITCH_INIT_MPS)
+        f = nominal.fly_nominal(problem, s1, s2, s2, nominal.V_SWITCH_INIT_MPS)
         skipped = (f.phase == 2) & (f.t_switch < f.t_chute) & f.done
-        return jnp.where(skipped, range_km + rd.range_error_m(problem, f) / 1e3, jnp.nan)
+        return jnp.where(skipped, range_km + nominal.range_error_m(problem, f) / 1e3, jnp.nan)
 
     s1, s2 = np.meshgrid(np.radians(sigma_1_deg), np.radians(sigma_2_deg), indexing="ij")
     return np.asarray(jax.vmap(fly)(jnp.asarray(s1.ravel()), jnp.asarray(s2.ravel())))
@@ -104,7 +104,7 @@ def test_unreachable_range_is_refused_before_the_design_with_the_reachable_inter
     # a brute-force grid of the design's banks (0.5 deg first entry) lands inside the quoted
     # interval and never near the refused range
     landed = _landed_ranges_km(
-        _problem(scenario), 14000.0, _design_banks_deg(0.5), np.degrees(rd._profile_banks())
+        _problem(scenario), 14000.0, _design_banks_deg(0.5), np.degrees(reach.profile_bank_span())
     )
     landed = landed[np.isfinite(landed)]
     assert landed.size > 0
@@ -122,13 +122,13 @@ def test_uncaptured_entry_angle_is_refused_before_the_design_with_the_corridor(p
     shallow, steep = (float(x) for x in text.split("allowed: ")[1].split(" deg")[0].split(" .. "))
     assert steep < shallow < -4.5
     landed = _landed_ranges_km(
-        _problem(scenario), 8000.0, _design_banks_deg(2.0), np.degrees(rd._profile_banks())
+        _problem(scenario), 8000.0, _design_banks_deg(2.0), np.degrees(reach.profile_bank_span())
     )
     assert not np.isfinite(landed).any()  # brute force: nothing skips and lands
     # and the shallow end of the quoted corridor does
     inside = paper.with_overrides([f"entry.fpa_deg={shallow}"])
     landed = _landed_ranges_km(
-        _problem(inside), 8000.0, _design_banks_deg(2.0), np.degrees(rd._profile_banks())
+        _problem(inside), 8000.0, _design_banks_deg(2.0), np.degrees(reach.profile_bank_span())
     )
     assert np.isfinite(landed).any()
 
@@ -136,11 +136,13 @@ def test_uncaptured_entry_angle_is_refused_before_the_design_with_the_corridor(p
 def test_a_design_that_misses_the_target_is_refused(paper):
     problem = _problem(paper)
     # a design whose first-entry bank is not the root: its nominal lands far from the target
-    wrong = rd.DesignResult(math.radians(80.0), 1.0472, 1.0472, 7300.0, [])
-    flight = rd.fly_nominal(problem, wrong.sigma_1, wrong.sigma_a, wrong.sigma_b, wrong.v_switch)
-    assert abs(float(rd.range_error_m(problem, flight))) > 1e5
+    wrong = design.DesignResult(math.radians(80.0), 1.0472, 1.0472, 7300.0, [])
+    flight = nominal.fly_nominal(
+        problem, wrong.sigma_1, wrong.sigma_a, wrong.sigma_b, wrong.v_switch
+    )
+    assert abs(float(nominal.range_error_m(problem, flight))) > 1e5
     with pytest.raises(gj.ScenarioError) as e:
-        rd.require_design(problem, wrong, paper.config["entry"], paper.config["vehicle"])
+        design.require_design(problem, wrong, paper.config["entry"], paper.config["vehicle"])
     assert _one_line(e).startswith("entry.range_km: 8000 km; the reference design did not")
 
 
@@ -152,13 +154,13 @@ def test_the_fine_first_guess_at_the_overshoot_boundary_brackets_a_falling_root(
         "lunar-skip-entry", overrides=["entry.fpa_deg=-5.3", "entry.range_km=6000"]
     )
     problem = _problem(sc)
-    guess = rd.fine_first_entry_guess(problem)
+    guess = design.fine_first_entry_guess(problem)
     assert guess is not None and 118.0 < math.degrees(guess) < 118.5
-    a = rd.PROFILE_INIT_RAD[0]
-    ends = [guess - rd.SIGMA_1_FINE_STEP_RAD, guess, guess + rd.SIGMA_1_FINE_STEP_RAD]
-    flights = [rd.fly_nominal(problem, s, a, a, rd.V_SWITCH_INIT_MPS) for s in ends]
-    assert all(int(rd._fate(f)) == rd.SKIP_LANDS for f in flights[1:])
-    err = [float(rd.range_error_m(problem, f)) for f in flights]
+    a = nominal.PROFILE_INIT_RAD[0]
+    ends = [guess - design.SIGMA_1_FINE_STEP_RAD, guess, guess + design.SIGMA_1_FINE_STEP_RAD]
+    flights = [nominal.fly_nominal(problem, s, a, a, nominal.V_SWITCH_INIT_MPS) for s in ends]
+    assert all(int(nominal.fate_of(f)) == nominal.SKIP_LANDS for f in flights[1:])
+    err = [float(nominal.range_error_m(problem, f)) for f in flights]
     assert err[1] > 0.0 > err[2] or err[0] > 0.0 > err[1]
 
 
@@ -172,15 +174,15 @@ def test_the_reach_check_looks_again_on_a_fine_grid_at_the_overshoot_boundary(mo
     )
     problem = _problem(sc)
     entry, vehicle = sc.config["entry"], sc.config["vehicle"]
-    monkeypatch.setattr(rd, "SIGMA_1_STEP_RAD", math.radians(7.0))
-    coarse = rd.candidate_banks()
+    monkeypatch.setattr(reach, "SIGMA_1_STEP_RAD", math.radians(7.0))
+    coarse = reach.candidate_banks()
     assert not np.any((coarse > math.radians(118.0)) & (coarse < math.radians(120.7)))
-    lo, hi, guess = rd.require_reachable(problem, entry, vehicle)
+    lo, hi, guess = reach.require_reachable(problem, entry, vehicle)
     assert 118.0 < math.degrees(guess) < 120.7
     assert lo < 6000.0 < hi
-    monkeypatch.setattr(rd, "SIGMA_1_REACH_FINE_STEP_RAD", math.radians(6.0))
+    monkeypatch.setattr(reach, "SIGMA_1_REACH_FINE_STEP_RAD", math.radians(6.0))
     with pytest.raises(gj.ScenarioError) as e:
-        rd.require_reachable(problem, entry, vehicle)
+        reach.require_reachable(problem, entry, vehicle)
     assert _one_line(e).startswith("entry.fpa_deg: -5.3 deg; the nominal flight never both")
 
 

@@ -18,6 +18,15 @@ from gnc_jax.guidance.entry.base import (
     drag_and_lift,
     flight_variables,
 )
+from gnc_jax.guidance.entry.corrector import correct
+from gnc_jax.guidance.entry.phases import (
+    apogee_gate,
+    bank_sign,
+    phase_events,
+    switch_by_speed,
+    switch_threshold_m,
+)
+from gnc_jax.guidance.entry.predictor import filter_ratios, predict
 from gnc_jax.guidance.entry.skip_entry import SkipEntryGuidance
 from gnc_jax.systems.capsule.simulation import guidance_context
 
@@ -61,14 +70,14 @@ def test_ratio_filter_is_first_order_towards_the_measured_ratios(law_and_ctx):
     assert float(ng) > 0.05
     n = 7
     for _ in range(n):
-        dr, lr = law.filter_ratios(state, nav, ng, ctx)
+        dr, lr = filter_ratios(law, state, nav, ng, ctx)
         state = state._replace(drag_ratio=dr, lift_ratio=lr)
     decay = (1.0 - float(ctx.ratio_filter_gain)) ** n
     np.testing.assert_allclose(float(state.drag_ratio), 1.3 + decay * (1.0 - 1.3), rtol=1e-12)
     np.testing.assert_allclose(float(state.lift_ratio), 0.8 + decay * (1.0 - 0.8), rtol=1e-12)
     # Below 0.05 g the ratios are not updated.
     low = nav._replace(drag_mps2=1e-3 * drag, lift_mps2=1e-3 * lift)
-    assert law.filter_ratios(state, low, jnp.asarray(0.01), ctx) == (
+    assert filter_ratios(law, state, low, jnp.asarray(0.01), ctx) == (
         state.drag_ratio,
         state.lift_ratio,
     )
@@ -158,7 +167,7 @@ def test_predictor_coast_step_costs_less_accuracy_than_the_corrector_tolerance(l
 
     @jax.jit
     @jax.vmap
-    def predict(i):
+    def predictions(i):
         def one(l):
             c = ctx.model
             dr, lr = jnp.asarray(tr.drag_ratio)[i], jnp.asarray(tr.lift_ratio)[i]
@@ -166,12 +175,12 @@ def test_predictor_coast_step_costs_less_accuracy_than_the_corrector_tolerance(l
             y = EntryState(jnp.asarray(tr.r_m)[i], jnp.asarray(tr.v_mps)[i])
             s0 = jnp.asarray(tr.sigma_0_rad)[i]
             t, up = jnp.asarray(tr.t_s)[i], jnp.asarray(tr.pulled_up)[i]
-            p = l.predict(y, t, up, s0, m, ctx.target_fixed)
+            p = predict(l, y, t, up, s0, m, ctx.target_fixed)
             return p.miss_m, p.kind, p.steps
 
         return one(law), one(fine)
 
-    coarse, reference = predict(jnp.asarray(cycles))
+    coarse, reference = predictions(jnp.asarray(cycles))
     np.testing.assert_array_equal(coarse[1], 0)  # every prediction ends at the switch point
     np.testing.assert_array_equal(reference[1], 0)
     assert float(jnp.max(jnp.abs(coarse[0] - reference[0]))) < float(law.range_tolerance_m)
@@ -194,7 +203,7 @@ def test_levelling_off_at_the_dip_is_not_a_pull_up_nor_a_second_entry(law_and_ct
         s = state
         for h, hd in zip(altitudes, hdots):
             fv = FlightVariables(jnp.asarray(9.5e3), jnp.asarray(0.0), h, jnp.asarray(hd))
-            phase, pulled, dip, _ = law._phase_events(s, fv, jnp.asarray(ng), live)
+            phase, pulled, dip, _ = phase_events(law, s, fv, jnp.asarray(ng), live)
             s = s._replace(phase=phase, pulled_up=pulled, dip_altitude_m=dip)
         return s
 
@@ -207,7 +216,7 @@ def test_levelling_off_at_the_dip_is_not_a_pull_up_nor_a_second_entry(law_and_ct
     assert bool(climbed.pulled_up) and int(climbed.phase) == 1
     state_climbed = climbed
     fv = FlightVariables(jnp.asarray(9.0e3), jnp.asarray(0.0), 62_000.0, jnp.asarray(-30.0))
-    phase, *_ = law._phase_events(state_climbed, fv, jnp.asarray(1.5), live)
+    phase, *_ = phase_events(law, state_climbed, fv, jnp.asarray(1.5), live)
     assert int(phase) == 3
 
 
@@ -243,11 +252,11 @@ def test_corrector_rounds_equal_the_slot_wise_corrector(law_and_ctx):
     start = jnp.asarray(sigma + offsets)
 
     def rounds(y, t, up, s0, m):
-        return law.correct(y, t, up, s0, m, ctx.target_fixed, jnp.asarray(True))
+        return correct(law, y, t, up, s0, m, ctx.target_fixed, jnp.asarray(True))
 
     def slots(y, t, up, s0, m):
         def miss(s, active):
-            p = law.predict(y, t, up, s, m, ctx.target_fixed, active)
+            p = predict(law, y, t, up, s, m, ctx.target_fixed, active)
             return p.miss_m, p.crossrange_m, p.steps.astype(float)
 
         return bounded_regula_falsi_with_aux(
@@ -286,7 +295,7 @@ def test_midpoint_bank_at_16_s_predicts_closer_to_fine_steps_than_the_held_bank_
 
     def miss(variant):
         def one(y, t, up, s0, m):
-            p = variant.predict(y, t, up, s0, m, ctx.target_fixed)
+            p = predict(variant, y, t, up, s0, m, ctx.target_fixed)
             return p.miss_m, p.kind, p.steps
 
         return jax.jit(jax.vmap(one))(y, t, up, jnp.asarray(sigma), model)
@@ -321,7 +330,7 @@ def test_switch_point_is_smooth_in_the_bank(law_and_ctx):
     pick = lambda a: a[i]  # noqa: E731
     y, t, up, s0, m = jax.tree_util.tree_map(pick, (y, t, up, jnp.asarray(sigma), model))
     d = jnp.radians(jnp.linspace(-0.2, 0.2, 201))
-    f = jax.jit(jax.vmap(lambda s: law.predict(y, t, up, s0 + s, m, ctx.target_fixed).miss_m))(d)
+    f = jax.jit(jax.vmap(lambda s: predict(law, y, t, up, s0 + s, m, ctx.target_fixed).miss_m))(d)
     fit = np.polyval(np.polyfit(np.asarray(d), np.asarray(f), 3), np.asarray(d))
     assert float(np.ptp(np.asarray(f))) > 100e3  # steep
     assert float(np.max(np.abs(np.asarray(f) - fit))) < 1.5e3
@@ -355,9 +364,9 @@ def test_a_fast_crest_is_not_an_apogee_switch(law_and_ctx):
             phase=jnp.asarray(1), pulled_up=jnp.asarray(True), dip_altitude_m=jnp.asarray(60e3)
         )
         fv = FlightVariables(jnp.asarray(v_sw + dv), jnp.asarray(0.0), 62e3, jnp.asarray(-5.0))
-        phase, *_ = g._phase_events(state, fv, jnp.asarray(1.5), live)
+        phase, *_ = phase_events(g, state, fv, jnp.asarray(1.5), live)
         assert int(phase) == want
-        assert bool(g._apogee_gate(jnp.asarray(v_sw + dv))) == (want == 3)
+        assert bool(apogee_gate(g, jnp.asarray(v_sw + dv))) == (want == 3)
 
 
 def test_first_entry_reversal_threshold_narrows_towards_the_kepler_load(law_and_ctx):
@@ -369,7 +378,7 @@ def test_first_entry_reversal_threshold_narrows_towards_the_kepler_load(law_and_
     _, law, ctx = law_and_ctx
     wide, final = float(law.switch_crossrange_m), float(law.switch_crossrange_final_m)
     lo, hi = float(law.kepler_load_g), float(law.switch_narrow_load_g)
-    f = law.switch_threshold_m
+    f = lambda pulled, ng: switch_threshold_m(law, pulled, ng)
     t, fa = jnp.asarray(True), jnp.asarray(False)
     assert float(f(fa, jnp.asarray(lo))) == wide  # before the pull-up: the wide threshold
     assert float(f(t, jnp.asarray(3.0))) == wide
@@ -386,7 +395,8 @@ def test_first_entry_reversal_threshold_narrows_towards_the_kepler_load(law_and_
     chi = final + 0.6 * (wide - final)  # target on the left while the bank turns right
     live = jnp.asarray(True)
     for pulled, ng, reverses in [(t, lo + 0.1 * (hi - lo), True), (t, hi, False), (fa, lo, False)]:
-        sign, reverse = law._bank_sign(
+        sign, reverse = bank_sign(
+            law,
             state,
             jnp.asarray(1),
             fv,
@@ -409,7 +419,7 @@ def test_a_reference_without_a_kepler_phase_is_switched_to_on_speed(law_and_ctx)
     _, law, ctx = law_and_ctx
     ref = law.reference
     apogee = eqx.tree_at(lambda g: g.reference.drag_load_g, law, ref.drag_load_g.at[0].set(0.6))
-    assert bool(apogee._by_speed()) and not bool(law._by_speed())
+    assert bool(switch_by_speed(apogee)) and not bool(switch_by_speed(law))
     m = ctx.model
     y = state_at(61.6e3, ctx)
     nav = EntryNav(y, *drag_and_lift(y, m.vehicle, m.earth, m.atmosphere))
@@ -430,18 +440,18 @@ def test_a_reference_without_a_kepler_phase_is_switched_to_on_speed(law_and_ctx)
             dip_altitude_m=jnp.asarray(61.6e3 if pulled else 62.5e3),
         )
         fv = FlightVariables(jnp.asarray(v_sw + dv), jnp.asarray(0.0), 62e3, jnp.asarray(hdot))
-        phase, *_ = apogee._phase_events(state, fv, jnp.asarray(ng), live)
+        phase, *_ = phase_events(apogee, state, fv, jnp.asarray(ng), live)
         assert int(phase) == want, (phase0, pulled, dv, hdot, ng)
     # predictions of the flight's corrector cycles: the packaged (Kepler) reference ends some
     # at the switch point; the same cycles with an apogee reference all fly to the chute
     y, t, up, sigma, model = _corrector_cycles(law_and_ctx, every=8)
     kinds = {}
     for g in (law, apogee):
-        predict = jax.vmap(
-            lambda g, y, t, u, s, m: g.predict(y, t, u, s, m, ctx.target_fixed),
+        batch = jax.vmap(
+            lambda g, y, t, u, s, m: predict(g, y, t, u, s, m, ctx.target_fixed),
             in_axes=(None, 0, 0, 0, 0, 0),
         )
-        p = jax.jit(predict)(g, y, t, up, jnp.asarray(sigma), model)
+        p = jax.jit(batch)(g, y, t, up, jnp.asarray(sigma), model)
         kinds[g is law] = set(np.asarray(p.kind).tolist())
     assert 0 in kinds[True]
     assert kinds[False] <= {1, 2, 4} and 1 in kinds[False]
@@ -466,13 +476,13 @@ def test_a_predicted_dive_ends_short_instead_of_diverging(law_and_ctx):
     y = EntryState(y0.r, y0.v)
 
     @jax.jit
-    def predict(g):
+    def lift_down(g):
         pull = jnp.asarray(False)
-        return g.predict(y, 0.0, pull, jnp.radians(180.0), model, ctx.target_fixed)
+        return predict(g, y, 0.0, pull, jnp.radians(180.0), model, ctx.target_fixed)
 
     unguarded = eqx.tree_at(lambda g: g.predictor_dive_load_g, law, 1000.0)
-    guarded, diverged = predict(law), predict(unguarded)
-    fine = predict(dataclasses.replace(unguarded, predictor_dt_s=1.0, predictor_coast_dt_s=1.0))
+    guarded, diverged = lift_down(law), lift_down(unguarded)
+    fine = lift_down(dataclasses.replace(unguarded, predictor_dt_s=1.0, predictor_coast_dt_s=1.0))
     assert int(fine.kind) == 1 and float(fine.miss_m) < -1000e3  # lands far short
     assert int(guarded.kind) == 4
     np.testing.assert_allclose(float(guarded.miss_m), float(fine.miss_m), rtol=0.1)

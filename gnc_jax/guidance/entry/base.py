@@ -169,9 +169,20 @@ class AbstractEntryGuidance(AbstractGuidanceLaw):
     from the state ``log`` (an :class:`EntryGuidanceLog`), ``phase``, ``pulled_up``,
     ``sigma_0``, ``bank_offset``, ``drag_ratio``, ``lift_ratio`` and ``last_status`` (a
     :class:`~gnc_jax.root_finding.RootStatus` code) for the outcome and the trace.
+
+    A law that tracks a designed second-entry reference says so with
+    :meth:`reference_switch_load_g`; the capsule system then designs the reference for the
+    scenario and hands it to the law's ``from_config`` as ``ctx``.
     """
 
     laws: ClassVar[dict[str, type]] = {}
+
+    @classmethod
+    def reference_switch_load_g(cls, section: dict) -> float | None:
+        """The load (g) that places the switch point of the second-entry reference this law
+        tracks, read from the law's scenario ``section``; ``None`` (the default): the law
+        tracks no designed reference."""
+        return None
 
 
 class FlightVariables(NamedTuple):

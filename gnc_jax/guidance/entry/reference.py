@@ -1,6 +1,7 @@
 """The second-entry reference trajectory the skip-entry law tracks (seed 003 §2.2): a table
 against Earth-relative speed with its switch state and the sensitivities of eq. 7 and eq. 10.
-Designed offline by :mod:`gnc_jax.guidance.entry.reference_design`."""
+Designed offline by :mod:`gnc_jax.guidance.entry.design` (kept by
+:mod:`gnc_jax.guidance.entry.cache`) for each scenario by the capsule system."""
 
 import equinox as eqx
 import jax.numpy as jnp

@@ -3,7 +3,7 @@
 File units follow the paper (km, km/s, deg, %, 3-sigma dispersions); the simulation is SI.
 """
 
-from ...guidance.entry.reference_design import FPA_RANGE_DEG
+from ...guidance.entry.reach import FPA_RANGE_DEG
 from ...schema import Field, ScenarioError
 
 F = Field

@@ -591,8 +591,8 @@ def _target(cfg: dict, earth, entry) -> Vector3:
 
 def build(scenario) -> CapsuleSimulation:
     """Simulation data of a validated capsule scenario (SI units); the law (with the reference
-    it designs for this vehicle, entry and target) is built by the system from
-    ``[guidance.<law>]``."""
+    designed for this vehicle, entry and target: :mod:`gnc_jax.systems.capsule.reference`) is
+    built by the system from ``[guidance.<law>]``."""
     return build_from_config(scenario.config)
 
 

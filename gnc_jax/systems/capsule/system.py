@@ -1,7 +1,8 @@
 """The capsule system's contract: lunar-return skip entry (seed 003).
 
 Truth, actuator and sensors are in :mod:`gnc_jax.systems.capsule.simulation`; the law in
-:mod:`gnc_jax.guidance.entry.skip_entry`; the scenario sections in
+:mod:`gnc_jax.guidance.entry.skip_entry`, with the second-entry reference the system designs
+for it in :mod:`gnc_jax.systems.capsule.reference`; the scenario sections in
 :mod:`gnc_jax.systems.capsule.schema`.
 """
 
@@ -24,6 +25,7 @@ from ...plotting import ellipse_xy, pyplot, saver
 from ..base import AbstractSystem, TraceRequest, register_system
 from . import schema as capsule_scenario
 from . import simulation as capsule_sim
+from .reference import law_reference
 
 # Cost model of CapsuleSystem.steps_per_run: trajectory fractions of the paper scenario.
 MEAN_SPEED_FRACTION = 0.58  # chute range / (flight time x entry speed): 8000 km in 1250 s at 11
@@ -503,8 +505,11 @@ class CapsuleSystem(AbstractSystem):
         (ax.set_ylim if vertical else ax.set_xlim)(lim)
 
     def build(self, scenario):
-        sim = capsule_sim.build(scenario)
-        return sim, self.build_law(scenario.config, sim)
+        """The simulation data and the law, handed the reference designed for it
+        (:func:`~gnc_jax.systems.capsule.reference.law_reference`) as its ``ctx``."""
+        config, sim = scenario.config, capsule_sim.build(scenario)
+        law = self.laws()[config["guidance"]["law"]]
+        return sim, self.build_law(config, law_reference(law, config, sim))
 
     def simulate(self, params, law, key, record=False):
         return capsule_sim.simulate(params, law, key, record=record)

@@ -1,0 +1,160 @@
+"""The skip-entry law's corrector (seed 003 eqs. 11-15): the first-entry bank sigma_0 whose
+predicted range error is zero, by the bounded regula falsi of :mod:`gnc_jax.root_finding`, a
+fixed-iteration ``lax`` loop over the predictions of :mod:`gnc_jax.guidance.entry.predictor`.
+Each function takes the law (:class:`~gnc_jax.guidance.entry.skip_entry.SkipEntryGuidance`) for
+its bounds, tolerance and loop sizes.
+"""
+
+import jax
+import jax.numpy as jnp
+
+from ...root_finding import RegulaFalsiResult, regula_falsi
+from .predictor import (
+    finished_prediction,
+    integrating,
+    prediction_origin,
+    predictor_start,
+    predictor_step,
+    profile,
+)
+from .state import SkipEntryState
+
+# Predictor steps a corrector cycle takes between two looks at which predictions ended (see
+# correct below): a look costs about a step (a prediction's end and the next one's
+# start, for every run of the batch) and a finished prediction waits for it half a round on
+# average; at 16 s steps a 256-run chunk's corrector time is least at 8 (16: the same, 4: 7 %
+# more).
+ROUND_STEPS = 8
+
+
+def _where(pick, new, old):
+    return jax.tree_util.tree_map(lambda a, b: jnp.where(pick, a, b), new, old)
+
+
+def warm_start(law, state: SkipEntryState, speed):
+    """The corrector's first guess at ``speed``: with ``corrector_start = "secant"`` the
+    bank the last solution's profile planned for this speed (the root it would have
+    if the flight went as planned), else the last solution sigma_0 itself (seed 003)."""
+    if law.corrector_start != "secant":
+        return state.sigma_0
+    planned = profile(law, state.sigma_0, state.plan_speed, speed)
+    return jnp.where(jnp.isnan(state.plan_speed), state.sigma_0, planned)
+
+
+def corrector_cycle(law, state: SkipEntryState, y, t, speed, ctx, model, pulled, active):
+    """The corrector on a predictor-corrector step (every ``pc_every`` control steps),
+    else the previous solution. Returns the result and whether it is a new solution: only
+    an ``active`` run (in phase 1) does any work."""
+
+    def pc(_):
+        res = correct(
+            law,
+            y,
+            t,
+            pulled,
+            warm_start(law, state, speed),
+            model,
+            ctx.target_fixed,
+            active,
+            state.corrector_slope,
+            state.dip_altitude_m,
+        )
+        return res._replace(slope=jnp.asarray(res.slope, dtype=float))
+
+    def no_pc(_):
+        z = jnp.zeros((), int)
+        return RegulaFalsiResult(
+            x=state.sigma_0,
+            f_x=jnp.zeros(()),
+            converged=jnp.asarray(True),
+            n_evals_early_exit=z,
+            n_evals_total=z,
+            status=z,
+            aux=state.predicted_crossrange,
+            cost=jnp.zeros(()),
+            slope=state.corrector_slope,
+        )
+
+    if ctx.cycle_start is None:
+        is_pc_step = (state.step % ctx.pc_every) == 0
+    else:
+        is_pc_step = ctx.cycle_start
+    active = active & is_pc_step  # (should the cond be batched, an idle step predicts nothing)
+    res = jax.lax.cond(is_pc_step, pc, no_pc, None)
+    return res, active
+
+
+def correct(
+    law,
+    y,
+    t,
+    pulled_up,
+    sigma_prev,
+    model,
+    target_fixed,
+    enabled,
+    slope=None,
+    dip_altitude_m=None,
+):
+    """Bounded regula falsi on sigma_0 (seed 003 eqs. 11-15), at most
+    1 + n_bracket + n_iter predictions.
+
+    Warm-started at the previous solution; with ``corrector_start = "secant"`` and the
+    previous cycle's ``slope`` (m/rad), a miss of the warm start is followed by the secant
+    step on that slope instead of the Δσ step of eq. 15. The result's ``aux`` is the
+    predicted crossrange at the switch point of the solution, its ``cost`` the number of
+    predictor RK4 steps taken by all predictions of the cycle, its ``slope`` this
+    cycle's.
+
+    The predictions of the whole cycle are one loop over predictor steps, in rounds of
+    ``ROUND_STEPS``: after each round, a run whose prediction has ended gives its range
+    error to the root finder (the :class:`~gnc_jax.root_finding.RegulaFalsi` machine) and
+    starts the prediction it proposes next. Under ``vmap`` the loop runs until the run
+    with the most predictor steps in the cycle is done; with a loop per prediction slot
+    instead, every slot runs as long as its slowest run, which at 16 s steps costs a
+    256-run chunk's corrector 7 % more. The solve is the same either way."""
+
+    secant = law.corrector_start == "secant"
+    solver = regula_falsi(
+        law.bracket_step_rad,
+        law.bank_min_rad,
+        law.bank_max_rad,
+        law.range_tolerance_m,
+        law.n_bracket,
+        law.n_iter,
+        illinois=True,
+        decreasing=True,
+        enabled=enabled,
+        slope=slope if secant else None,
+        anderson_bjorck=secant,
+    )
+    origin = prediction_origin(law, y, t, pulled_up, model, dip_altitude_m)
+    z = jnp.zeros(())
+    s = solver.init(sigma_prev, z, z)
+    x, active = solver.propose(s)
+
+    def steps(c, sigma_0):
+        """Up to ROUND_STEPS steps of the prediction."""
+        c, _ = jax.lax.while_loop(
+            lambda cj: integrating(law, cj[0]) & (cj[1] < ROUND_STEPS),
+            lambda cj: (
+                predictor_step(law, cj[0], sigma_0, origin.speed_mps, model),
+                cj[1] + 1,
+            ),
+            (c, jnp.asarray(0, jnp.int32)),
+        )
+        return c
+
+    def round_(carry):
+        s, x, c = carry
+        c = steps(c, x)
+        end = ~integrating(law, c)
+        p = finished_prediction(law, c, y, t, model, target_fixed)
+        s = _where(end, solver.absorb(s, x, p.miss_m, p.crossrange_m, p.steps.astype(float)), s)
+        x_next, active = solver.propose(s)
+        c_next = predictor_start(law, origin, x_next, active, model)
+        return s, jnp.where(end, x_next, x), _where(end, c_next, c)
+
+    c = predictor_start(law, origin, x, active, model)
+    s, _, _ = jax.lax.while_loop(lambda sxc: ~solver.done(sxc[0]), round_, (s, x, c))
+    return solver.result(s)

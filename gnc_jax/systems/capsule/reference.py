@@ -1,0 +1,57 @@
+"""The second-entry reference of a capsule scenario: the nominal problem of its vehicle,
+entry and target, designed once (:func:`gnc_jax.guidance.entry.cache.reference_for`: the reach
+check, the design and the tabulation, behind a progress bar, then cached on disk) and handed to
+the guidance law by :meth:`CapsuleSystem.build <gnc_jax.systems.capsule.CapsuleSystem.build>`.
+"""
+
+import jax.numpy as jnp
+
+from ...dynamics.entry import entry_state_from_conditions
+from ...guidance.entry.base import AbstractEntryGuidance, EntryModel
+from ...guidance.entry.cache import reference_for
+from ...guidance.entry.nominal import NominalProblem
+from ...guidance.entry.reference import ReferenceTrajectory
+from .simulation import CapsuleSimulation
+
+
+def scenario_reference(
+    config: dict, sim: CapsuleSimulation, switch_load_g: float
+) -> ReferenceTrajectory:
+    """The designed second-entry reference of a validated configuration ``config`` and its
+    simulation data ``sim`` (the nominal vehicle, Earth, atmosphere, entry and target), for a
+    law whose reference switches at the load ``switch_load_g`` (g; the law's Kepler-phase
+    threshold). The design settings are the ``[reference]`` section's; the cache file is named
+    by a hash of the ``entry``, ``vehicle`` and ``atmosphere`` sections, the switch load and
+    the design settings."""
+    e, ref = config["entry"], config["reference"]
+    chute = jnp.asarray(e["chute_altitude_km"] * 1e3, dtype=jnp.float64)
+    problem = NominalProblem(
+        model=EntryModel(sim.vehicle, sim.earth, sim.atmosphere),
+        entry=entry_state_from_conditions(sim.entry, sim.earth),
+        target_fixed=sim.target_fixed,
+        kepler_load_g=jnp.asarray(switch_load_g, dtype=jnp.float64),
+        chute_altitude_m=chute,
+        v_end_mps=jnp.asarray(ref["v_end_mps"], dtype=jnp.float64),
+    )
+    description = {
+        "entry": e,
+        "vehicle": config["vehicle"],
+        "atmosphere": config["atmosphere"],
+        "kepler_load_g": switch_load_g,
+        "v_end_mps": ref["v_end_mps"],
+    }
+    reference, _ = reference_for(
+        problem, description, w_margin=ref["w_margin"], steps=ref["design_steps"]
+    )
+    return reference
+
+
+def law_reference(
+    law: type[AbstractEntryGuidance], config: dict, sim: CapsuleSimulation
+) -> ReferenceTrajectory | None:
+    """What the capsule system hands the law class ``law`` as the ``ctx`` of its
+    ``from_config``: the reference of :func:`scenario_reference` for a law that tracks one
+    (its :meth:`~gnc_jax.guidance.entry.base.AbstractEntryGuidance.reference_switch_load_g`
+    is not ``None``), else ``None``."""
+    load = law.reference_switch_load_g(config["guidance"][law.law_name])
+    return None if load is None else scenario_reference(config, sim, load)
