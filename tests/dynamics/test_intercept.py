@@ -20,6 +20,7 @@ from gnc_jax.dynamics.intercept import (
     drift_kick_drift_step,
     propagate,
 )
+from gnc_jax.systems.intercept.params import parameters
 from gnc_jax.systems.intercept.simulation import initial_state
 
 ARC_S = 91_200.0  # the guided 25.3 h of Table 2 (25.5 h minus the 10 min coast)
@@ -43,7 +44,7 @@ def _paper_pair_rhs(thrust_mps2):
 @pytest.fixture(scope="module")
 def table2():
     sc = gj.load_scenario("bennu-apn-ideal")
-    y0, planar = initial_state(sc.config)
+    y0, planar = initial_state(parameters(sc.config))
     assert planar
     return y0
 

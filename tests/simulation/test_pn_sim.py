@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import gnc_jax as gj
+from gnc_jax.systems.intercept.params import parameters
 from gnc_jax.systems.intercept.simulation import initial_state
 from gnc_jax.systems.intercept.system import estimate_pulse_trains
 
@@ -36,8 +37,8 @@ def test_guidance_removes_the_delivery_error(short_scenario):
 
 
 def test_3d_geometry_is_the_planar_case_on_bennus_orbit():
-    planar, _ = initial_state(gj.load_scenario("bennu-apn").config)
-    y3, is_planar = initial_state(gj.load_scenario("bennu-apn-3d").config)
+    planar, _ = initial_state(parameters(gj.load_scenario("bennu-apn").config))
+    y3, is_planar = initial_state(parameters(gj.load_scenario("bennu-apn-3d").config))
     assert not is_planar
     # Table 1: r = a (1 - e^2) / (1 + e cos nu), out of the ecliptic by the inclination
     a, e, nu = 1.12639 * 1.495978707e11, 0.20375, np.radians(101.70395)

@@ -1,9 +1,10 @@
 """The intercept system (scenario kind ``intercept``): deep-space intercept with variable-
 coefficient augmented PN and pulse firing (seed 004).
 
-``schema`` its scenario sections, ``simulation`` one closed-loop run (heliocentric truth, LOS
-camera, packed EKF, pulse engine), ``system`` the registered contract with its statistics and
-figures. Its guidance laws are the family :mod:`gnc_jax.guidance.intercept`.
+``params`` its scenario parameters (each field declared once), ``schema`` their cross-field
+checks, ``simulation`` one closed-loop run (heliocentric truth, LOS camera, packed EKF, pulse
+engine), ``system`` the registered contract with its statistics and figures. Its guidance
+laws are the family :mod:`gnc_jax.guidance.intercept`.
 """
 
 from .system import InterceptSystem

@@ -1,116 +1,15 @@
-"""Scenario fields of the variable-coefficient augmented PN intercept (seed 004).
+"""Cross-field checks of the variable-coefficient augmented PN intercept (seed 004).
 
-File units follow the paper (km, km/s, AU, deg, urad) and are converted to SI when the
-simulation is built; the field names carry the units. Where the paper is silent (engine,
-guidance step, pulse width, trigger thresholds, navigation sensor rate) the defaults and their
-reasons are given in the field docs and in README "Augmented PN".
+The scenario fields are declared once in :mod:`gnc_jax.systems.intercept.params`; these
+checks read the validated configuration in its file units (km, km/s, AU, deg).
 """
 
 import math
 
 from ...constants import AU_M
-from ...schema import Field, ScenarioError
-
-F = Field
+from ...schema import ScenarioError
 
 SUN_RADIUS_M = 6.957e8  # IAU 2015 nominal solar radius
-
-SCHEMA = {
-    "approach": {
-        "geometry": F(
-            "str",
-            "planar",
-            choices=("planar", "bennu-3d"),
-            doc="planar: seed 004 Table 2 states as given (z = 0); bennu-3d: the target from "
-            "the Table 1 elements and the Table 2 relative state rotated into its (radial, "
-            "transverse, normal) frame",
-        ),
-        "target_position_km": F(
-            "floats", [1.34175e8, 0.0, 0.0], length=3, units="km", doc="Table 2 (planar)"
-        ),
-        "target_velocity_kmps": F(
-            "floats", [0.0, 34.50561, 0.0], length=3, units="km/s", doc="Table 2 (planar)"
-        ),
-        "impactor_position_km": F(
-            "floats", [1.34176e8, 9.36358e5, 0.0], length=3, units="km", doc="Table 2"
-        ),
-        "impactor_velocity_kmps": F(
-            "floats", [0.0, 24.30561, 0.0], length=3, units="km/s", doc="Table 2"
-        ),
-        "semi_major_axis_au": F("float", 1.12639, lo=0.0, lo_open=True, hi=100.0, units="AU"),
-        "eccentricity": F("float", 0.20375, lo=0.0, hi=0.99),
-        "inclination_deg": F("float", 6.03494, lo=0.0, hi=180.0, units="deg"),
-        "raan_deg": F("float", 2.06087, lo=-360.0, hi=360.0, units="deg"),
-        "arg_perihelion_deg": F("float", 66.22307, lo=-360.0, hi=360.0, units="deg"),
-        "true_anomaly_deg": F("float", 101.70395, lo=-360.0, hi=360.0, units="deg"),
-    },
-    "dynamics": {
-        "mu_sun_m3s2": F("float", 1.32715e20, lo=0.0, lo_open=True, hi=1e22, units="m^3/s^2"),
-        "mu_target_m3s2": F(
-            "float",
-            4.892,
-            lo=0.0,
-            hi=1e12,
-            units="m^3/s^2",
-            doc="Bennu GM (Scheeres et al. 2019); 0 = no target gravity",
-        ),
-        "target_radius_m": F(
-            "float", 245.0, lo=0.0, lo_open=True, hi=1e7, units="m", doc="homogeneous sphere"
-        ),
-    },
-    "spacecraft": {
-        "mass_kg": F("float", 372.0, lo=0.0, lo_open=True, hi=1e5, units="kg", doc="seed 000"),
-        "thrust_n": F("float", 88.0, lo=0.0, lo_open=True, hi=1e4, units="N", doc="seed 000"),
-        "isp_s": F(
-            "float", 230.0, lo=10.0, hi=1e4, units="s", doc="specific impulse; >= 10 s: a thruster"
-        ),
-        "pulse_width_s": F(
-            "float",
-            0.05,
-            lo=0.0,
-            lo_open=True,
-            hi=60.0,
-            units="s",
-            doc="engine on-time per control step while the trigger is on (minimum impulse "
-            "bit = thrust x pulse width); must not exceed guidance.dt_s",
-        ),
-    },
-    "guidance": {
-        "coast_s": F(
-            "float",
-            600.0,
-            lo=0.0,
-            lo_open=True,
-            units="s",
-            doc="no firing in the last coast_s (paper: 10 min)",
-        ),
-        "dt_s": F(
-            "float", 1.0, lo=0.0, lo_open=True, hi=60.0, units="s", doc="guidance/control step"
-        ),
-        "coast_steps": F(
-            "int", 60, lo=1, hi=100000, doc="RK4 steps of the final unpowered coast to the B-plane"
-        ),
-    },
-    "navigation": {
-        "model": F(
-            "str",
-            "ekf",
-            choices=("ekf", "perfect"),
-            doc="ekf: camera LOS angles + EKF (navigation/ekf.py); perfect: the true state",
-        ),
-        "image_interval_s": F(
-            "float",
-            1.0,
-            lo=0.0,
-            lo_open=True,
-            hi=3600.0,
-            units="s",
-            doc="LOS measurement interval; a whole multiple of guidance.dt_s (paper: every "
-            "guidance step, Fig. 4)",
-        ),
-        "process_noise_m2s3": F("float", 1e-18, lo=0.0, hi=1.0, units="m^2/s^3"),
-    },
-}
 
 
 def time_of_flight_s(cfg: dict) -> float:

@@ -35,7 +35,6 @@ from ..._numerics import computed_once, cross3, dot3, norm3, safe_norm
 from ..._random import stream_key, stream_normal
 from ..._status import Status
 from ..._types import Array, Float, Matrix3, PRNGKeyArray, Scalar, Vector3
-from ...constants import AU_M
 from ...dynamics.impactor import Engine, perturb_direction
 from ...dynamics.intercept import (
     InterceptDynamics,
@@ -65,40 +64,8 @@ from ...navigation.packed_ekf import (
     propagate_packed,
     unpack,
 )
-from ...params import from_scenario, param
 from ..loop import flatten_trace, scan_in_blocks, with_status
-
-
-class PNErrors(eqx.Module):
-    """1-sigma error sources (seed 004 Table 4), SI; each field declared once with its
-    scenario field (``[navigation]`` knowledge, ``[errors]``)."""
-
-    knowledge_position_m: Float[Array, "3"] = param(
-        [100.0, 10.0, 10.0],
-        toml="knowledge_position_km",
-        section="navigation",
-        scale=1e3,
-        length=3,
-        lo=0.0,
-        hi=1e6,
-        units="km",
-        doc="1-sigma initial position knowledge along the LOS, across it in the orbit "
-        "plane, and out of plane (Table 4: (100, 10); planar runs ignore the third)",
-    )
-    knowledge_velocity_mps: Scalar = param(
-        0.1, section="navigation", lo=0.0, hi=1e3, units="m/s", doc="1-sigma per axis (Table 4)"
-    )
-    attitude_rad: Scalar = param(
-        320.0,
-        toml="attitude_urad",
-        section="errors",
-        convert=lambda urad: urad * 1e-6,
-        lo=0.0,
-        hi=1e5,
-        units="urad",
-        doc="1-sigma attitude measurement error (Table 4): white on every LOS measurement, "
-        "and the thrust pointing error of each firing",
-    )
+from .params import InterceptParameters, PNErrors, parameters
 
 
 class PNSimulation(eqx.Module):
@@ -460,34 +427,33 @@ def simulate(
     return outcome, rec
 
 
-def initial_state(cfg: dict) -> tuple[InterceptState, bool]:
-    """Nominal initial truth (SI) of a validated pn configuration, and whether it is planar.
+def initial_state(p: InterceptParameters) -> tuple[InterceptState, bool]:
+    """Nominal initial truth (SI) of an intercept scenario's parameters, and whether it is
+    planar.
 
     ``bennu-3d``: the target's state from the Table 1 elements (ecliptic J2000, the paper's
     mu_sun), and the Table 2 relative state (impactor minus target) expressed in the target's
     (radial, transverse, orbit-normal) frame: the planar case rotated onto Bennu's orbit.
     """
-    a = cfg["approach"]
-    km = lambda x: np.asarray(x, float) * 1e3  # noqa: E731
-    r_t, v_t = km(a["target_position_km"]), km(a["target_velocity_kmps"])
-    r_rel = km(a["impactor_position_km"]) - r_t
-    v_rel = km(a["impactor_velocity_kmps"]) - v_t
-    planar = a["geometry"] == "planar"
+    a = p.approach
+    r_t, v_t = np.asarray(a.target_position_m), np.asarray(a.target_velocity_mps)
+    r_rel = np.asarray(a.impactor_position_m) - r_t
+    v_rel = np.asarray(a.impactor_velocity_mps) - v_t
+    planar = a.geometry == "planar"
     if not planar:
         # The planar frame of Table 2: x radial, y transverse (the target is at perihelion).
         radial, transverse = r_t / np.linalg.norm(r_t), v_t / np.linalg.norm(v_t)
         rel_rtn = np.array([r_rel @ radial, r_rel @ transverse, r_rel[2]])
         vel_rtn = np.array([v_rel @ radial, v_rel @ transverse, v_rel[2]])
-        deg = np.pi / 180.0
         el = OrbitalElements(
-            a["semi_major_axis_au"] * AU_M,
-            a["eccentricity"],
-            a["inclination_deg"] * deg,
-            a["raan_deg"] * deg,
-            a["arg_perihelion_deg"] * deg,
-            a["true_anomaly_deg"] * deg,
+            a.semi_major_axis_m,
+            a.eccentricity,
+            a.inclination_rad,
+            a.raan_rad,
+            a.arg_perihelion_rad,
+            a.true_anomaly_rad,
         )
-        r_t, v_t = (np.asarray(x) for x in elements_to_state(el, cfg["dynamics"]["mu_sun_m3s2"]))
+        r_t, v_t = (np.asarray(x) for x in elements_to_state(el, p.dynamics.mu_sun_m3s2))
         x = r_t / np.linalg.norm(r_t)
         zn = np.cross(r_t, v_t)
         zn = zn / np.linalg.norm(zn)
@@ -495,19 +461,41 @@ def initial_state(cfg: dict) -> tuple[InterceptState, bool]:
         rot = np.stack([x, y, zn], axis=1)  # RTN -> ecliptic
         r_rel, v_rel = rot @ rel_rtn, rot @ vel_rtn
     f = lambda x: jnp.asarray(x, dtype=jnp.float64)  # noqa: E731
-    y0 = InterceptState(f(r_t), f(v_t), f(r_rel), f(v_rel), f(cfg["spacecraft"]["mass_kg"]))
+    y0 = InterceptState(f(r_t), f(v_t), f(r_rel), f(v_rel), p.spacecraft.mass_kg)
     return y0, planar
 
 
+class LoopSizes(NamedTuple):
+    """The loop lengths of one run, shared by :func:`build` and the cost model
+    (:meth:`InterceptSystem.steps_per_run`)."""
+
+    cutoff_time_s: float  # guidance stops here: the straight-line time of flight - coast_s
+    n_images: float  # LOS images (measurement intervals) before the cutoff
+    steps_per_image: float  # guidance steps per image
+
+
+def loop_sizes(p: InterceptParameters, y0: InterceptState) -> LoopSizes:
+    """The loop lengths of a scenario with parameters ``p`` and initial truth ``y0``; whole
+    numbers (ints) unless they would not fit in one, so that a runaway scenario still gets a
+    (refusable) cost estimate."""
+    r0, v0 = np.asarray(y0.r), np.asarray(y0.v)
+    tof = float(-(r0 @ v0) / (v0 @ v0))
+    t_cut = tof - p.guidance.coast_s
+    image_dt = p.navigation.image_interval_s
+    images, per_image = t_cut / image_dt, image_dt / p.guidance.dt_s
+    if images < 1e15 and per_image < 1e15:
+        images, per_image = math.ceil(images - 1e-9), round(per_image)
+    return LoopSizes(t_cut, images, per_image)
+
+
 def build(scenario) -> PNSimulation:
-    """Simulation data of a validated intercept :class:`Scenario` (SI units); the law is built
-    by the system from ``[guidance.apn]`` (``systems.intercept``)."""
-    cfg = scenario.config
-    dy, sc, g, nv, er = (
-        cfg[k] for k in ("dynamics", "spacecraft", "guidance", "navigation", "errors")
-    )
+    """Simulation data of a validated intercept :class:`Scenario` (SI units, from
+    :func:`gnc_jax.systems.intercept.params.parameters`); the law is built by the system from
+    ``[guidance.apn]`` (``systems.intercept``)."""
+    p = parameters(scenario.config)
+    dy, sc, g, nv = p.dynamics, p.spacecraft, p.guidance, p.navigation
     f = lambda x: jnp.asarray(x, dtype=jnp.float64)  # noqa: E731
-    y0, planar = initial_state(cfg)
+    y0, planar = initial_state(p)
     h = jnp.array([0.0, 0.0, 1.0])  # ecliptic / paper-plane normal: the B-plane reference
     c_bi = b_plane_frame(y0.v, h)
     rho = -np.asarray(y0.r)
@@ -515,47 +503,43 @@ def build(scenario) -> PNSimulation:
     cross = np.cross(np.asarray(h), u)
     cross = cross / np.linalg.norm(cross)
     los_frame0 = f(np.stack([u, cross, np.cross(u, cross)]))
-    r0, v0 = np.asarray(y0.r), np.asarray(y0.v)
-    tof = float(-(r0 @ v0) / (v0 @ v0))
-    dynamics = InterceptDynamics(
-        f(dy["mu_sun_m3s2"]), f(dy["mu_target_m3s2"]), f(dy["target_radius_m"])
-    )
-    engine = Engine(f(sc["thrust_n"]), f(sc["isp_s"]))
-    t_cut = tof - g["coast_s"]
+    sizes = loop_sizes(p, y0)
+    dynamics = InterceptDynamics(dy.mu_sun_m3s2, dy.mu_target_m3s2, dy.target_radius_m)
+    engine = Engine(sc.thrust_n, sc.isp_s)
     context = PNGuidanceContext(
-        range0_m=f(np.linalg.norm(r0)),
-        cutoff_time_s=f(t_cut),
-        pulse_fraction=f(sc["pulse_width_s"] / g["dt_s"]),
+        range0_m=f(np.linalg.norm(np.asarray(y0.r))),
+        cutoff_time_s=f(sizes.cutoff_time_s),
+        pulse_fraction=sc.pulse_width_s / g.dt_s,
         dynamics=dynamics,
         reference_normal=h,
-        dt_s=float(g["dt_s"]),
+        dt_s=g.dt_s,
     )
-    image_dt = nv["image_interval_s"]
-    errors = from_scenario(PNErrors, cfg)
-    sim = PNSimulation(
+    return PNSimulation(
         y0=y0,
         context=context,
         dynamics=dynamics,
         engine=engine,
-        errors=errors,
-        process_noise_m2s3=f(nv["process_noise_m2s3"]),
+        errors=p.errors,
+        process_noise_m2s3=nv.process_noise_m2s3,
         c_bi=c_bi,
         los_frame0=los_frame0,
         planar=planar,
-        nav_model=nv["model"],
-        n_images=int(math.ceil(t_cut / image_dt - 1e-9)),
-        steps_per_image=int(round(image_dt / g["dt_s"])),
-        coast_steps=int(g["coast_steps"]),
-        measurement=GaussianLOSMeasurement(errors.attitude_rad, planar=planar),
+        nav_model=nv.model,
+        n_images=int(sizes.n_images),
+        steps_per_image=int(sizes.steps_per_image),
+        coast_steps=g.coast_steps,
+        measurement=GaussianLOSMeasurement(p.errors.attitude_rad, planar=planar),
     )
-    return sim
 
 
 __all__ = [
+    "LoopSizes",
     "PNErrors",
     "PNOutcome",
     "PNRecord",
     "PNSimulation",
     "build",
+    "initial_state",
+    "loop_sizes",
     "simulate",
 ]

@@ -2,11 +2,11 @@
 and pulse firing (seed 004).
 
 Truth, camera, EKF, law and pulses are in :mod:`gnc_jax.systems.intercept.simulation`; the laws
-in the family :mod:`gnc_jax.guidance.intercept` (``apn``); the scenario sections in
+in the family :mod:`gnc_jax.guidance.intercept` (``apn``); the scenario parameters in
+:mod:`gnc_jax.systems.intercept.params`, their cross-field checks in
 :mod:`gnc_jax.systems.intercept.schema`.
 """
 
-import math
 import pathlib
 from typing import Any, ClassVar
 
@@ -18,6 +18,7 @@ from ...guidance.intercept.base import AbstractInterceptGuidance
 from ...plotting import ellipse_xy, pyplot, saver
 from ..base import AbstractSystem, TraceRequest, register_system
 from ..impact import IMPACT_LABELS, hit_statistics, impact_objective, impact_statistics
+from . import params as intercept_params
 from . import schema as intercept_scenario
 from . import simulation as intercept_sim
 
@@ -79,15 +80,14 @@ def estimate_pulse_trains(scenario):
     :func:`gnc_jax.guidance.intercept.apn.pulse_train_estimate`) from the scenario's initial
     truth, engine and coast."""
     sim, law = InterceptSystem().build(scenario)
-    cfg = scenario.config
-    y0 = sim.y0
-    sc = cfg["spacecraft"]
-    bit = sc["thrust_n"] * sc["pulse_width_s"] / sc["mass_kg"]
+    p = intercept_params.parameters(scenario.config)
+    y0, sc, dt_s = sim.y0, p.spacecraft, p.guidance.dt_s
+    bit = float(sc.thrust_n * sc.pulse_width_s / sc.mass_kg)  # a float: the estimate is Python
     return law.pulse_trains(
         PNNavigation(y0.r, y0.v, y0.r_target),
         sim.dynamics,
-        coast_s=float(cfg["guidance"]["coast_s"]),
-        engine_accel_mps2=bit / cfg["guidance"]["dt_s"],
+        coast_s=p.guidance.coast_s,
+        engine_accel_mps2=bit / dt_s,
         impulse_bit_mps=bit,
     )
 
@@ -192,25 +192,23 @@ def intercept_steps(config: dict) -> float:
     """Cost of one intercept run (:meth:`InterceptSystem.steps_per_run`) in guidance steps of
     the EKF loop: the guidance steps (a step with perfect navigation costs 0.4 of one), the LOS
     images (an EKF update costs 1.4 steps) and the final coast's RK4 steps, from the loop
-    lengths :func:`gnc_jax.systems.intercept.simulation.build` sets; a float, so that a
-    scenario whose loops would not fit in an integer still gets a (refusable) estimate."""
-    g, nv = config["guidance"], config["navigation"]
-    t_cut = intercept_scenario.time_of_flight_s(config) - g["coast_s"]
-    images = t_cut / nv["image_interval_s"]
-    per_image = nv["image_interval_s"] / g["dt_s"]
-    if images < 1e15 and per_image < 1e15:
-        images, per_image = math.ceil(images - 1e-9), round(per_image)
-    if nv["model"] == "perfect":
-        return float(0.4 * images * per_image + g["coast_steps"])
-    return float(images * per_image + 1.4 * images + g["coast_steps"])
+    lengths :func:`gnc_jax.systems.intercept.simulation.build` is built with
+    (:func:`~gnc_jax.systems.intercept.simulation.loop_sizes`); a float, so that a scenario
+    whose loops would not fit in an integer still gets a (refusable) estimate."""
+    p = intercept_params.parameters(config)
+    y0, _ = intercept_sim.initial_state(p)
+    sizes = intercept_sim.loop_sizes(p, y0)
+    images, per_image = sizes.n_images, sizes.steps_per_image
+    if p.navigation.model == "perfect":
+        return float(0.4 * images * per_image + p.guidance.coast_steps)
+    return float(images * per_image + 1.4 * images + p.guidance.coast_steps)
 
 
 @register_system
 class InterceptSystem(AbstractSystem):
     name = "intercept"
     description = "deep-space intercept: augmented PN with Schmitt-triggered pulse firing"
-    sections = intercept_scenario.SCHEMA
-    parameter_modules = (intercept_sim.PNErrors,)
+    parameter_modules = intercept_params.PARAMETER_MODULES
     law_family = AbstractInterceptGuidance
     default_law = "apn"
     metrics = ("miss_rms_m", "miss_max_m", "dv_mean_mps", "firings_mean")

@@ -1,9 +1,10 @@
 """The midcourse system (scenario kind ``midcourse``): autonomous midcourse correction of an
 Earth-Mars transfer by B-plane targeting (seed 001).
 
-``schema`` its scenario sections, ``simulation`` one dispersed run of navigation fixes and
-corrections, ``system`` the registered contract with its statistics and figures. Its guidance
-laws are the family :mod:`gnc_jax.guidance.midcourse`.
+``params`` its scenario parameters (each field declared once), ``schema`` their cross-field
+checks, ``simulation`` one dispersed run of navigation fixes and corrections, ``system`` the
+registered contract with its statistics and figures. Its guidance laws are the family
+:mod:`gnc_jax.guidance.midcourse`.
 """
 
 from .system import MidcourseSystem

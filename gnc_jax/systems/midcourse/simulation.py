@@ -22,7 +22,6 @@ encounter epoch. Everything is SI.
 """
 
 import functools
-import math
 from typing import Any, NamedTuple
 
 import equinox as eqx
@@ -61,137 +60,9 @@ from ...guidance.midcourse.targeting import (
     jacobian_autodiff,
     jacobian_central_difference,
 )
-from ...params import from_scenario, param
 from ...schema import ScenarioError
 from ..loop import with_status
-from .schema import epochs_s
-
-
-def _pct(x):
-    return x / 100.0
-
-
-class MidcourseErrors(eqx.Module):
-    """Error sources (SI, EME2000 axes). Initial errors are drawn once per run; navigation and
-    execution errors at every fix. Each field is declared once with its scenario field
-    (``[dispersion]``, ``[navigation]``, ``[execution]``), from which those sections derive.
-    """
-
-    position_m: Scalar = param(
-        289.0,
-        toml="position_km",
-        section="dispersion",
-        scale=1e3,
-        lo=0.0,
-        hi=1e6,
-        units="km",
-        doc="1-sigma initial position, per axis",
-    )
-    velocity_mps: Scalar = param(
-        0.577,
-        section="dispersion",
-        lo=0.0,
-        hi=1e3,
-        units="m/s",
-        doc="1-sigma initial velocity, per axis",
-    )
-    position_offset_m: Vector3 = param(
-        [0.0, 0.0, 0.0],
-        toml="position_offset_km",
-        section="dispersion",
-        scale=1e3,
-        length=3,
-        lo=-1e6,
-        hi=1e6,
-        units="km",
-        doc="deterministic initial position error (the paper's cycle cases: 500 km in x)",
-    )
-    velocity_offset_mps: Vector3 = param(
-        [0.0, 0.0, 0.0],
-        section="dispersion",
-        length=3,
-        lo=-1e3,
-        hi=1e3,
-        units="m/s",
-        doc="deterministic initial velocity error (the paper's cycle cases: 1 m/s in x)",
-    )
-    nav_position_m: Scalar = param(
-        0.0,
-        toml="position_sigma_km",
-        section="navigation",
-        scale=1e3,
-        lo=0.0,
-        hi=1e6,
-        units="km",
-        doc="1-sigma random position error per fix",
-    )
-    nav_velocity_mps: Scalar = param(
-        0.0,
-        toml="velocity_sigma_mps",
-        section="navigation",
-        lo=0.0,
-        hi=1e3,
-        units="m/s",
-        doc="1-sigma random velocity error per fix",
-    )
-    nav_position_bias_m: Vector3 = param(
-        [0.0, 0.0, 0.0],
-        toml="position_bias_km",
-        section="navigation",
-        scale=1e3,
-        length=3,
-        lo=-1e6,
-        hi=1e6,
-        units="km",
-        doc="constant position error of every fix",
-    )
-    nav_velocity_bias_mps: Vector3 = param(
-        [0.0, 0.0, 0.0],
-        toml="velocity_bias_mps",
-        section="navigation",
-        length=3,
-        lo=-1e3,
-        hi=1e3,
-        units="m/s",
-        doc="constant velocity error of every fix (the paper: 0.3 m/s in x)",
-    )
-    final_fix_scale: Scalar = param(
-        1.0,
-        section="navigation",
-        lo=0.0,
-        hi=1e3,
-        doc="the last fix's error is scaled by this (the paper's 0.01 m/s final fix: 1/30)",
-    )
-    magnitude_bias: Scalar = param(
-        0.0,
-        toml="magnitude_bias_pct",
-        section="execution",
-        convert=_pct,
-        lo=-50.0,
-        hi=50.0,
-        units="%",
-        doc="systematic burn magnitude error (the paper: 3 % and 5 %)",
-    )
-    magnitude_sigma: Scalar = param(
-        0.0,
-        toml="magnitude_sigma_pct",
-        section="execution",
-        convert=_pct,
-        lo=0.0,
-        hi=50.0,
-        units="%",
-        doc="1-sigma random magnitude error",
-    )
-    pointing_sigma_rad: Scalar = param(
-        0.0,
-        toml="pointing_sigma_deg",
-        section="execution",
-        convert=math.radians,
-        lo=0.0,
-        hi=30.0,
-        units="deg",
-        doc="1-sigma pointing error per axis",
-    )
+from .params import MidcourseErrors, MidcourseParameters, parameters
 
 
 class MidcourseSimulation(eqx.Module):
@@ -614,87 +485,69 @@ def reference_normal(plane: str, t_encounter_s: float) -> Vector3:
     return h / jnp.linalg.norm(h)
 
 
-def _model(cfg: dict, t: dict[str, float], t_max_s: float) -> HeliocentricModel:
-    """The heliocentric force model of a validated configuration (SI)."""
-    sc, dy = cfg["spacecraft"], cfg["dynamics"]
+def _model(p: MidcourseParameters, t_max_s: float) -> HeliocentricModel:
+    """The heliocentric force model of a scenario's parameters (SI)."""
+    sc, dy = p.spacecraft, p.dynamics
     f = lambda x: jnp.asarray(x, dtype=jnp.float64)  # noqa: E731
-    srp = sc["reflectivity"] * sc["srp_area_m2"] / sc["mass_kg"] if dy["srp"] else 0.0
+    srp = sc.reflectivity * sc.srp_area_m2 / sc.mass_kg if bool(dy.srp) else 0.0
     table = None
-    if dy["ephemeris"] == "table":
-        table = EphemerisTable.spanning(t["first_fix_epoch"], t_max_s)
+    if dy.ephemeris == "table":
+        table = EphemerisTable.spanning(p.mission.first_fix_epoch_s, t_max_s)
     return HeliocentricModel(
         ephemeris=table,
-        gm_planets=f(GM_PLANETS if dy["planets"] else [0.0] * 8),
+        gm_planets=f(GM_PLANETS if bool(dy.planets) else [0.0] * 8),
         srp_m2_per_kg=f(srp),
         solar_pressure_npm2=f(SOLAR_PRESSURE_1AU),
-        rtol=f(dy["rtol"]),
-        atol=f(dy["atol"]),
-        solver=dy["solver"],
-        max_steps=int(dy["max_steps"]),
+        rtol=dy.rtol,
+        atol=dy.atol,
+        solver=dy.solver,
+        max_steps=dy.max_steps,
     )
 
 
-def _has_errors(cfg: dict) -> bool:
-    """Whether navigation or execution errors are on (then the Δv baseline is solved apart)."""
-    nv, ex = cfg["navigation"], cfg["execution"]
-    return any(
-        v != 0.0
-        for v in (
-            nv["position_sigma_km"],
-            nv["velocity_sigma_mps"],
-            *nv["position_bias_km"],
-            *nv["velocity_bias_mps"],
-            ex["magnitude_bias_pct"],
-            ex["magnitude_sigma_pct"],
-            ex["pointing_sigma_deg"],
-        )
-    )
-
-
-def _simulation(cfg: dict) -> MidcourseSimulation:
-    """The simulation data of a validated configuration, before the nominal is designed."""
-    mi, dy, nv, g, goal = (
-        cfg[k] for k in ("mission", "dynamics", "navigation", "guidance", "goal")
-    )
+def _simulation(p: MidcourseParameters) -> MidcourseSimulation:
+    """The simulation data of a scenario's parameters, before the nominal is designed."""
+    mi, dy, nv, g = p.mission, p.dynamics, p.navigation, p.guidance
     f = lambda x: jnp.asarray(x, dtype=jnp.float64)  # noqa: E731
-    t = epochs_s(cfg)
-    t_max = t["encounter_epoch"] + dy["window_days"] * SECONDS_PER_DAY
-    aim_bt_br = f(mi["aim_b_km"]) * 1e3
-    aim = jnp.stack([aim_bt_br[1], aim_bt_br[0]])  # Q order: (B_R, B_T[, t])
-    if g["targets"] == "b_plane_tof":
+    t_max = mi.encounter_epoch_s + dy.window_s
+    aim = jnp.stack([mi.aim_b_m[1], mi.aim_b_m[0]])  # Q order: (B_R, B_T[, t])
+    if g.targets == "b_plane_tof":
         aim = jnp.concatenate([aim, jnp.zeros(1)])
+    enabled = bool(g.enabled)
     return MidcourseSimulation(
-        model=_model(cfg, t, t_max),
+        model=_model(p, t_max),
         r0_m=jnp.zeros(3),
         v0_mps=jnp.zeros(3),
-        t_first_fix_s=f(t["first_fix_epoch"]),
-        fix_interval_s=f(nv["interval_days"] * SECONDS_PER_DAY),
-        t_encounter_s=f(t["encounter_epoch"]),
+        t_first_fix_s=f(mi.first_fix_epoch_s),
+        fix_interval_s=nv.fix_interval_s,
+        t_encounter_s=f(mi.encounter_epoch_s),
         t_max_s=f(t_max),
         aim=aim,
-        ref_normal=reference_normal(mi["reference_plane"], t["encounter_epoch"]),
-        goal=f([goal["b_km"] * 1e3, goal["tof_s"]]),
-        errors=from_scenario(MidcourseErrors, cfg),
-        n_fixes=int(nv["fixes"]),
-        guidance_enabled=bool(g["enabled"]),
-        reference_dv=bool(g["enabled"] and _has_errors(cfg)),
+        ref_normal=reference_normal(mi.reference_plane, mi.encounter_epoch_s),
+        goal=jnp.stack([p.goal.b_m, p.goal.tof_s]),
+        errors=p.errors,
+        n_fixes=nv.fixes,
+        guidance_enabled=enabled,
+        reference_dv=enabled and p.errors.has_per_fix_errors(),
     )
 
 
 def build(scenario) -> MidcourseSimulation:
-    """Simulation data of a validated midcourse :class:`Scenario` (SI); the law is built by the
-    system from ``[guidance.<law>]`` (``systems.midcourse``).
+    """Simulation data of a validated midcourse :class:`Scenario` (SI, from
+    :func:`gnc_jax.systems.midcourse.params.parameters`); the law is built by the system from
+    ``[guidance.<law>]`` (``systems.midcourse``).
 
     Designs the nominal transfer (`design_nominal`, cached) before returning; a nominal that
     cannot be targeted raises :class:`ScenarioError`.
     """
-    cfg = scenario.config
-    sim = _simulation(cfg)
-    plane = cfg["mission"]["reference_plane"]
+    p = parameters(scenario.config)
+    sim = _simulation(p)
     try:
-        nominal = design_nominal(sim, epochs_s(cfg)["launch_epoch"])
+        nominal = design_nominal(sim, p.mission.launch_epoch_s)
     except BPlaneError as error:
-        raise ScenarioError(f"mission.reference_plane: {plane!r}: {error}") from None
+        raise ScenarioError(
+            f"mission.reference_plane: {p.mission.reference_plane!r}: {error}"
+        ) from None
     except ValueError as error:
         raise ScenarioError(
             f"mission: {error}; allowed: epochs and aim point of a feasible transfer"

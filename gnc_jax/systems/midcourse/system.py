@@ -3,7 +3,8 @@
 
 Truth propagation, navigation and execution errors are in
 :mod:`gnc_jax.systems.midcourse.simulation`; the correction rule and its Newton targeter in
-:mod:`gnc_jax.guidance.midcourse.targeting`; the scenario sections in
+:mod:`gnc_jax.guidance.midcourse.targeting`; the scenario parameters in
+:mod:`gnc_jax.systems.midcourse.params`, their cross-field checks in
 :mod:`gnc_jax.systems.midcourse.schema`.
 """
 
@@ -18,6 +19,7 @@ from ...constants import SECONDS_PER_DAY
 from ...guidance.midcourse.targeting import AbstractMidcourseGuidance
 from ...plotting import pyplot, saver
 from ..base import AbstractSystem, register_system
+from . import params as midcourse_params
 from . import schema as midcourse_scenario
 from . import simulation as midcourse_sim
 
@@ -227,19 +229,19 @@ def midcourse_steps(config: dict) -> float:
     final predictions; per fix the law's Newton iterations and its last prediction, each as
     long as the time left to the encounter, plus the coast to the next fix), each scaled by
     rtol and at most ``max_steps`` steps."""
-    dy, nv, g = config["dynamics"], config["navigation"], config["guidance"]
-    law = g[g["law"]]
-    t = midcourse_scenario.epochs_s(config)
-    span = max((t["encounter_epoch"] - t["first_fix_epoch"]) / SECONDS_PER_DAY, 1.0)
-    steps = _ARC_STEPS[dy["solver"]] * (dy["rtol"] / 1e-13) ** -_RTOL_GROWTH
-    arc = min(steps, dy["max_steps"]) * _STEP_COST[dy["solver"]]  # from the first fix
+    p = midcourse_params.parameters(config)
+    dy, nv, day = p.dynamics, p.navigation, SECONDS_PER_DAY
+    law = config["guidance"][config["guidance"]["law"]]
+    span = max(p.mission.encounter_epoch_s - p.mission.first_fix_epoch_s, day)
+    steps = _ARC_STEPS[dy.solver] * (float(dy.rtol) / 1e-13) ** -_RTOL_GROWTH
+    arc = min(steps, dy.max_steps) * _STEP_COST[dy.solver]  # from the first fix
     solve = law["iterations"] * _ITERATION_ARCS[law["sensitivity"]] + 1.0
     arcs = 2.0
-    if g["enabled"]:
-        interval = nv["interval_days"]
-        left = sum(max(span - i * interval, 1.0) / span for i in range(nv["fixes"]))
-        arcs += left * solve + (nv["fixes"] - 1) * min(interval / span, 1.0)
-        if midcourse_sim._has_errors(config):
+    if bool(p.guidance.enabled):
+        interval = float(nv.fix_interval_s)
+        left = sum(max(span - i * interval, day) / span for i in range(nv.fixes))
+        arcs += left * solve + (nv.fixes - 1) * min(interval / span, 1.0)
+        if p.errors.has_per_fix_errors():
             arcs += solve  # the error-free reference correction
     return arcs * arc
 
@@ -248,8 +250,7 @@ def midcourse_steps(config: dict) -> float:
 class MidcourseSystem(AbstractSystem):
     name = "midcourse"
     description = "interplanetary midcourse correction by autonomous B-plane targeting"
-    sections = midcourse_scenario.SCHEMA
-    parameter_modules = (midcourse_sim.MidcourseErrors,)
+    parameter_modules = midcourse_params.PARAMETER_MODULES
     law_family = AbstractMidcourseGuidance
     default_law = "autonomous"
     metrics = ("b_err_km_rms", "tof_err_s_rms", "dv_mean_mps", "goal_met_pct")
