@@ -1,13 +1,62 @@
-"""Pieces every single-trajectory simulator shares: the outcome's status and the trace shape.
+"""The skeleton every single-trajectory simulator shares, and its pieces.
 
 A simulator returns ``(outcome, trace)``: ``outcome`` a NamedTuple whose first field is
 ``status`` (a :class:`~gnc_jax.Status` code), ``trace`` a NamedTuple of time series or ``None``.
+Every system's ``simulate`` is :func:`closed_loop` of three functions of its own: ``start``
+(the run's draws and its initial :class:`LoopState`), ``run`` (its scans) and ``finish`` (the
+outcome and its status). The loop's carry is a :class:`LoopState`: what is true, what the
+vehicle believes, what the law remembers, what the actuators hold and what the outcome counts,
+each a typed part of its own (gymnax's ``EnvState``).
 """
+
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 
 from .._status import Status, all_finite
+
+
+class LoopState(NamedTuple):
+    """The carry of a closed loop, by kind.
+
+    Attributes:
+        truth: the true state (dynamics, mass, the target's ephemeris).
+        estimate: what navigation believes (the filter's mean and covariance); ``()`` with
+            perfect navigation.
+        law: the guidance law's own state (its ``init``/``plan``/``step`` NamedTuple).
+        actuator: what the actuators remember between steps (engine on, pointing, the bank
+            actually flown); ``()`` when none.
+        tally: what the outcome counts along the way (Δv, firings, images used, ...).
+    """
+
+    truth: Any
+    estimate: Any
+    law: Any
+    actuator: Any
+    tally: Any
+
+
+def closed_loop(start: Callable, run: Callable, finish: Callable) -> Callable:
+    """A system's single-run ``simulate(params, law, key, record=False) -> (outcome, trace)``
+    from its three stages, the skeleton written once:
+
+    * ``start(params, law, key) -> (state, draws)``: the initial :class:`LoopState` and the
+      run's fixed draws (anything ``run`` and ``finish`` read that does not evolve);
+    * ``run(params, law, key, draws, state, record) -> (state, trace)``: the system's scans;
+    * ``finish(params, law, key, draws, state) -> outcome``: the outcome, status included
+      (:func:`with_status`).
+
+    ``trace`` is returned only when ``record`` (a static flag)."""
+
+    def simulate(params, law, key, record: bool = False):
+        state, draws = start(params, law, key)
+        state, trace = run(params, law, key, draws, state, record)
+        outcome = finish(params, law, key, draws, state)
+        return outcome, (trace if record else None)
+
+    return simulate
 
 
 def with_status(outcome, failures=()):
@@ -63,4 +112,11 @@ def zeros_like_fields(cls, **given):
     return cls(**{name: given.get(name, z) for name in cls._fields})
 
 
-__all__ = ["with_status", "flatten_trace", "scan_in_blocks", "zeros_like_fields"]
+__all__ = [
+    "LoopState",
+    "closed_loop",
+    "with_status",
+    "flatten_trace",
+    "scan_in_blocks",
+    "zeros_like_fields",
+]
