@@ -1,5 +1,7 @@
 """The Basilisk peer (benchmarks/peers/basilisk_impactor.py) flies gnc_jax's deep-impact-los:
-its numpy transcription of the law and the EKF and its Basilisk truth agree with gnc_jax's."""
+its numpy transcription of the law and the EKF and its Basilisk truth agree with gnc_jax's.
+
+Basilisk (PyPI ``bsk``) is in the ``test`` extra, so these tests run wherever the suite does."""
 
 import pathlib
 import sys
@@ -8,8 +10,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-
-pytest.importorskip("Basilisk")
 
 import gnc_jax as gj  # noqa: E402
 from gnc_jax.dynamics.impactor import ImpactorState, RelativeDynamics, propagate  # noqa: E402

@@ -4,7 +4,8 @@ numba's hand-written RK4 must reproduce gnc_jax's `integrate_fixed` RK4 run for 
 states, same step) to rounding, and heyoka's expression-system transcriptions must evaluate
 to gnc_jax's vector fields (entry: `entry_vector_field` with the exponential atmosphere;
 cruise: `heliocentric.vector_field` with plan94 evaluated directly), so that the benchmark
-compares integrators on the same equations.
+compares integrators on the same equations. heyoka is in the ``test`` extra (numba arrives with
+lamberthub), so these tests run wherever the suite does.
 """
 
 import importlib.util
@@ -98,7 +99,8 @@ def test_component_wise_rk4_equals_gnc_jax_rk4(peers, entry, gnc_legs):
 
 @pytest.mark.parametrize("leg", [0, 1, 3], ids=["entry", "100s", "300s"])
 def test_heyoka_entry_field_equals_gnc_jax(peers, entry, gnc_legs, leg):
-    hy = pytest.importorskip("heyoka")
+    import heyoka as hy
+
     states = entry.states if leg == 0 else gnc_legs[leg - 1]
     variables, rhs = peers.heyoka_entry_rhs(entry.consts)
     got = hy.cfunc(rhs, vars=variables)(
@@ -144,7 +146,8 @@ def _cruise_states():
 
 @pytest.mark.parametrize("sun", [True, False], ids=["full", "planets-only"])
 def test_heyoka_cruise_field_equals_gnc_jax(peers, sun):
-    hy = pytest.importorskip("heyoka")
+    import heyoka as hy
+
     model = HeliocentricModel(srp_m2_per_kg=jnp.asarray(0.0137 if sun else 0.0))
     if not sun:  # the planet terms alone, where they dominate
         model = HeliocentricModel(gm_sun=jnp.asarray(0.0))

@@ -24,23 +24,13 @@ def short_scenario(request):
     return gj.load_scenario(request.param, overrides=SHORT)
 
 
-def test_results_do_not_depend_on_chunking_or_devices(short_scenario):
-    a = gj.run_study(short_scenario, runs=10, seed=11, chunk_size=4, progress=False)
-    b = gj.run_study(short_scenario, runs=10, seed=11, chunk_size=10, progress=False, n_devices=1)
-    c = gj.run_study(short_scenario, runs=7, seed=11, chunk_size=3, progress=False)
-    for name in ("miss_m", "dv_mps", "delivery_error_m", "attitude_bias_rad"):
-        np.testing.assert_allclose(a.outcomes[name], b.outcomes[name], rtol=1e-9, atol=1e-9)
-        np.testing.assert_allclose(a.outcomes[name][:7], c.outcomes[name], rtol=1e-9, atol=1e-9)
-    np.testing.assert_array_equal(a.outcomes["firings"], b.outcomes["firings"])
-    # different seeds give different draws
-    d = gj.run_study(short_scenario, runs=3, seed=12, progress=False)
-    assert not np.allclose(d.outcomes["delivery_error_m"], a.outcomes["delivery_error_m"][:3])
-
-
 def test_the_law_corrects_the_delivery_error(short_scenario):
     study = gj.run_study(short_scenario, runs=20, seed=0, progress=False)
     s = study.summary()
     assert s["failed"] == 0
+    # another seed draws other errors (same run count: the same compiled program)
+    other = gj.run_study(short_scenario, runs=20, seed=1, progress=False)
+    assert not np.allclose(other.outcomes["delivery_error_m"], study.outcomes["delivery_error_m"])
     # the noise front end's LOS errors are its 10 urad model; no frame is ever rejected
     assert np.all(np.abs(study.outcomes["los_error_rms_urad"] - 10.0) < 3.0)
     assert np.all(study.outcomes["images_rejected"] == 0)
