@@ -17,8 +17,8 @@ To run under ``vmap`` the solve is a state machine (:class:`RegulaFalsi`) that p
 at a time and absorbs its f: :func:`bounded_regula_falsi` drives it with a fixed-length
 ``lax.scan`` whose slots are masked once a run's answer is known (a batch of guidance cycles
 then costs the same as its slowest member); a caller with evaluations of variable length can
-drive it with its own loop (see :meth:`SkipEntryGuidance.correct
-<gnc_jax.guidance.entry.skip_entry.SkipEntryGuidance.correct>`).
+drive it with its own loop (see the skip-entry law's corrector,
+:func:`gnc_jax.guidance.entry.corrector.correct`).
 ``n_evals_early_exit`` counts the evaluations a sequential early-exit loop would have made,
 which is the paper's "predictions per cycle" (seed 003 Table 3).
 
