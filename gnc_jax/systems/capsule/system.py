@@ -2,8 +2,9 @@
 
 Truth, actuator and sensors are in :mod:`gnc_jax.systems.capsule.simulation`; the law in
 :mod:`gnc_jax.guidance.entry.skip_entry`, with the second-entry reference the system designs
-for it in :mod:`gnc_jax.systems.capsule.reference`; the scenario sections in
-:mod:`gnc_jax.systems.capsule.schema`.
+for it in :mod:`gnc_jax.systems.capsule.reference`; the scenario parameters in
+:mod:`gnc_jax.systems.capsule.params` (their cross-field checks in
+:mod:`gnc_jax.systems.capsule.schema`).
 """
 
 import math
@@ -21,11 +22,21 @@ from ...dynamics.entry import entry_state_from_conditions
 from ...geometry.sphere import unit
 from ...guidance.entry.base import AbstractEntryGuidance, EntryModel
 from ...guidance.entry.corridor import DT_S, EntryEnvelope, track_footprints
+from ...params import from_scenario, schema_of
 from ...plotting import ellipse_xy, pyplot, saver
 from ..base import AbstractSystem, TraceRequest, register_system
-from . import schema as capsule_scenario
 from . import simulation as capsule_sim
+from .params import (
+    PARAMETER_MODULES,
+    CapsuleDispersions,
+    Entry,
+    GuidanceParams,
+    SimulationParams,
+    capsule_params,
+    loop_counts,
+)
 from .reference import law_reference
+from .schema import check as check_config
 
 # Cost model of CapsuleSystem.steps_per_run: trajectory fractions of the paper scenario.
 MEAN_SPEED_FRACTION = 0.58  # chute range / (flight time x entry speed): 8000 km in 1250 s at 11
@@ -169,9 +180,9 @@ def _predictions(plt, runs, ok, scenario):
 
 def _miss_against_ld(plt, runs, ok, scenario, dr, cr):
     """Chute miss against the dispersed lift-to-drag ratio (where the tails come from)."""
-    d = scenario.config["dispersions"]
+    d = from_scenario(CapsuleDispersions, scenario.config)  # 1-sigma fractions
     z = np.stack([runs[f"dispersion_{j}"] for j in range(10)], axis=1)[ok]
-    ld = (1.0 + d["cl_pct"] / 300.0 * z[:, 6]) / (1.0 + d["cd_pct"] / 300.0 * z[:, 7])
+    ld = (1.0 + float(d.lift_frac) * z[:, 6]) / (1.0 + float(d.drag_frac) * z[:, 7])
     fig, ax = plt.subplots(figsize=(7, 4))
     ax.semilogy(ld, np.maximum(np.hypot(dr, cr), 1e-3), ".", ms=3)
     ax.axhline(2.5, color="C2", lw=1, label="2.5 km")
@@ -237,10 +248,12 @@ def capsule_figures(summary, runs, scenario, out: pathlib.Path, traces) -> list[
 def entry_envelope(config: dict, load_limit_g: float) -> EntryEnvelope:
     """The entry corridor and footprint (:class:`~gnc_jax.guidance.entry.corridor.EntryEnvelope`)
     of a validated capsule configuration's nominal vehicle, atmosphere and entry."""
-    earth, vehicle, atmosphere, entry = capsule_sim.nominal_models(config)
+    p = capsule_params(config)
+    earth, vehicle, atmosphere, entry = capsule_sim.nominal_models(p)
     model = EntryModel(vehicle, earth, atmosphere)
-    chute = config["entry"]["chute_altitude_km"] * 1e3
-    return EntryEnvelope(model, entry, chute, config["simulation"]["max_time_s"], load_limit_g)
+    return EntryEnvelope(
+        model, entry, p.entry.chute_altitude_m, p.simulation.max_time_s, load_limit_g
+    )
 
 
 @jax.jit(static_argnames=("steps",))
@@ -269,7 +282,7 @@ def dispersed_footprints(config: dict, runs: int, seed: int) -> np.ndarray:
     axis of ``entry.range_km`` and of the runs' downrange errors), so the footprints do not
     depend on ``entry.range_km``. Needs no guidance law and no reference design."""
     sim = capsule_sim.build_from_config(config)
-    steps = int(math.ceil(config["simulation"]["max_time_s"] / DT_S))
+    steps = int(math.ceil(from_scenario(SimulationParams, config).max_time_s / DT_S))
     out = _run_footprints(sim, seed, jnp.arange(runs), steps)
     return np.asarray(out) / 1e3
 
@@ -306,8 +319,7 @@ def reachability(footprints_km: np.ndarray, range_km: float) -> dict[str, float]
 class CapsuleSystem(AbstractSystem):
     name = "capsule"
     description = "lunar-return skip entry: predictor-corrector and reference tracking"
-    sections = capsule_scenario.SCHEMA
-    parameter_modules = (capsule_sim.CapsuleDispersions,)
+    parameter_modules = PARAMETER_MODULES
     law_family = AbstractEntryGuidance
     default_law = "skip_entry"
     metrics = ("downrange_err_km", "crossrange_err_km", "load_peak_g_max", "predictions_mean")
@@ -346,7 +358,7 @@ class CapsuleSystem(AbstractSystem):
     chunk_per_device = 256
 
     def check(self, config):
-        capsule_scenario.check(config)
+        check_config(config)
 
     def steps_per_run(self, config):
         """Truth RK4 steps plus the predictor's RK4 steps (one truth-step equivalent each:
@@ -363,17 +375,20 @@ class CapsuleSystem(AbstractSystem):
         estimate is within about x3 on the off-nominal cases of
         ``benchmarks/capsule_cost.py``.
         """
-        e, s, g = config["entry"], config["simulation"], config["guidance"]
+        e = from_scenario(Entry, config)
+        s = from_scenario(SimulationParams, config)
+        clock = loop_counts(s, from_scenario(GuidanceParams, config))
+        g = config["guidance"]
         law = g.get(g.get("law", self.default_law), {})
-        flight_s = min(s["max_time_s"], e["range_km"] / (MEAN_SPEED_FRACTION * e["speed_kmps"]))
-        truth = math.ceil(flight_s / s["dt_s"])
+        flight_s = min(s.max_time_s, e.range_m / (MEAN_SPEED_FRACTION * float(e.speed_mps)))
+        truth = math.ceil(flight_s / clock.dt_s)
         dt = law.get("predictor_dt_s", 8.0)
         dt_coast = law.get("predictor_coast_dt_s", 32.0)
         horizon_s = HORIZON_FRACTION * flight_s
         horizon = horizon_s * ((1.0 - COAST_FRACTION) / dt + COAST_FRACTION / dt_coast)
         horizon = min(horizon, law.get("predictor_max_steps", 1000))
         slots = 1 + law.get("n_bracket", 6) + law.get("n_iter", 6)
-        cycles = FIRST_ENTRY_FRACTION * flight_s / g["pc_period_s"]
+        cycles = FIRST_ENTRY_FRACTION * flight_s / clock.pc_period_s
         return float(truth + cycles * min(PREDICTIONS_PER_CYCLE, slots) * horizon)
 
     def envelope_check(self, configs, load_limit_g=None, runs=None, seed=None, **options):
@@ -391,7 +406,7 @@ class CapsuleSystem(AbstractSystem):
         :func:`reachability`, with ``footprint_runs`` (the study's first runs, at most
         ``FOOTPRINT_RUNS_MAX``) and ``footprint_s`` (wall time of the angle's footprints, s)."""
         limit = self.LOAD_LIMIT_G if load_limit_g is None else float(load_limit_g)
-        field = capsule_scenario.SCHEMA["entry"]["fpa_deg"]
+        field = schema_of(Entry)["fpa_deg"]  # its declared range bounds the corridor search
         out, corridors, runs_fp = [], {}, {}
         for cfg in configs:
             env = entry_envelope(cfg, limit)
