@@ -19,8 +19,8 @@ from gnc_jax.guidance.entry.corridor import (
     track_footprint,
 )
 from gnc_jax.montecarlo import run_key
+from gnc_jax.systems.capsule import envelope as capsule_envelope
 from gnc_jax.systems.capsule import simulation as capsule_sim
-from gnc_jax.systems.capsule import system as capsule_system
 
 SHORT = ["simulation.max_time_s=2000.0"]  # the horizon of tests/test_envelope.py
 ZERO = [
@@ -78,9 +78,9 @@ def test_zero_dispersions_give_the_nominal_footprint_in_every_run(no_design):
     ranges of the nominal full-lift-down and landing-edge flights."""
     sc = gj.load_scenario("lunar-skip-entry", overrides=SHORT + ZERO)
     fpa = sc.config["entry"]["fpa_deg"]
-    fp = capsule_system.dispersed_footprints(sc.config, 3, seed=5)
+    fp = capsule_envelope.dispersed_footprints(sc.config, 3, seed=5)
     assert np.all(fp == fp[0])  # every run the same
-    env = capsule_system.entry_envelope(sc.config, 10.0)
+    env = capsule_envelope.entry_envelope(sc.config, 10.0)
     lo, hi = env.footprint(fpa)
     assert fp[0, 0] == pytest.approx(lo, rel=1e-6) and fp[0, 1] == pytest.approx(hi, rel=1e-2)
     f = env.flights([fpa], FOOTPRINT_BANKS_DEG)
@@ -110,7 +110,7 @@ def test_runs_fly_the_studys_draws():
     fold_in(key(seed), i)); the draws differ between runs."""
     sc = gj.load_scenario("lunar-skip-entry", overrides=SHORT)
     sim = capsule_sim.build(sc)
-    fp = capsule_system.dispersed_footprints(sc.config, 3, seed=7)
+    fp = capsule_envelope.dispersed_footprints(sc.config, 3, seed=7)
     start = np.array(entry_state_from_conditions(sim.entry, sim.earth).r)
     unit_start = start / np.linalg.norm(start)
     for i in range(3):
@@ -136,7 +136,7 @@ def test_a_dispersed_runs_shortest_range_matches_scipy():
     sc = gj.load_scenario("lunar-skip-entry", overrides=SHORT)
     sim = capsule_sim.build(sc)
     model, y0 = _run(sim, 0, 2)
-    fp = capsule_system.dispersed_footprints(sc.config, 3, seed=0)[2]
+    fp = capsule_envelope.dispersed_footprints(sc.config, 3, seed=0)[2]
     steps = env_steps(sc)
     down = fly_from_state(model, y0, np.pi, sim.chute_altitude_m, steps)
     start = np.array(entry_state_from_conditions(sim.entry, sim.earth).r)
@@ -182,7 +182,7 @@ def test_reachability_counts_and_quantiles():
     hi = rng.uniform(9000, 12000, 200)
     fp = np.stack([lo, hi], axis=1)
     fp[17] = np.nan
-    r = capsule_system.reachability(fp, 9500.0)
+    r = capsule_envelope.reachability(fp, 9500.0)
     assert r["reachable_fraction"] == np.sum(hi[np.arange(200) != 17] >= 9500.0) / 200
     w = hi - lo
     m = (lo + 0.1 * w <= 9500.0) & (9500.0 <= hi - 0.1 * w)
@@ -193,11 +193,11 @@ def test_reachability_counts_and_quantiles():
     # nowhere is that run, so the ends are the extremes of the others
     assert r["dispersed_footprint_min_km"] == np.delete(lo, 17).max()
     assert r["dispersed_footprint_max_km"] == np.delete(hi, 17).min()
-    r = capsule_system.reachability(np.stack([lo, hi], axis=1), 9500.0)  # all land: one
+    r = capsule_envelope.reachability(np.stack([lo, hi], axis=1), 9500.0)  # all land: one
     assert r["dispersed_footprint_min_km"] == np.sort(lo)[-2]  # run beyond each end
     assert r["dispersed_footprint_max_km"] == np.sort(hi)[1]
     fp[18] = np.nan  # two runs that land nowhere: more than 0.5 % reach nothing
-    r = capsule_system.reachability(fp, 9500.0)
+    r = capsule_envelope.reachability(fp, 9500.0)
     assert np.isnan(r["dispersed_footprint_min_km"]) and np.isnan(r["dispersed_footprint_max_km"])
 
 
@@ -210,11 +210,11 @@ def test_envelope_pre_check_columns_without_a_design(monkeypatch, no_design):
     system = sc.system
     cfgs = [sc.with_overrides({"entry.range_km": r}).config for r in (2500.0, 8000.0)]
     checks = system.envelope_check(cfgs, runs=3, seed=7)
-    fp = capsule_system.dispersed_footprints(cfgs[0], 3, seed=7)
+    fp = capsule_envelope.dispersed_footprints(cfgs[0], 3, seed=7)
     for check, r in zip(checks, (2500.0, 8000.0)):
         cols = check["columns"]
         assert check["feasible"] and cols["footprint_runs"] == 3
-        for k, v in capsule_system.reachability(fp, r).items():
+        for k, v in capsule_envelope.reachability(fp, r).items():
             assert cols[k] == v or (np.isnan(cols[k]) and np.isnan(v))
     assert checks[0]["columns"]["footprint_s"] == checks[1]["columns"]["footprint_s"]
     seen = {}

@@ -13,7 +13,7 @@ from gnc_jax import operating_envelope as envelope_module
 from gnc_jax.dynamics.entry import EntryState, entry_state_from_conditions
 from gnc_jax.guidance.entry.base import flight_variables
 from gnc_jax.guidance.entry.corridor import DT_S, fly_constant_bank
-from gnc_jax.systems.capsule.system import entry_envelope
+from gnc_jax.systems.capsule.envelope import entry_envelope
 from gnc_jax.systems.impactor.system import ImpactorSystem
 
 

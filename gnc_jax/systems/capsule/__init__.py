@@ -1,9 +1,12 @@
 """The capsule system (scenario kind ``capsule``): lunar-return skip entry (seed 003).
 
-``schema`` its scenario sections, ``simulation`` one closed-loop entry (dispersed truth, bank
-actuator, chute crossing), ``reference`` the second-entry reference designed for a scenario and
-handed to its law, ``system`` the registered contract with its statistics, envelope
-pre-check and figures. Its guidance laws are the family :mod:`gnc_jax.guidance.entry`.
+``params`` its scenario parameters (one Module per section, each field declared once;
+``dispersions`` the ``[dispersions]`` section) and ``schema`` their cross-field checks,
+``simulation`` one closed-loop entry (dispersed truth, bank actuator, chute crossing),
+``reference`` the second-entry reference designed for a scenario and handed to its law,
+``system`` the registered contract with its cost model and statistics, ``envelope`` its
+envelope pre-check (entry corridor, footprints) and ``figures`` its report figures. Its
+guidance laws are the family :mod:`gnc_jax.guidance.entry`.
 """
 
 from .system import CapsuleSystem

@@ -11,6 +11,8 @@ from ...guidance.entry.base import AbstractEntryGuidance, EntryModel
 from ...guidance.entry.cache import reference_for
 from ...guidance.entry.nominal import NominalProblem
 from ...guidance.entry.reference import ReferenceTrajectory
+from ...params import from_scenario
+from .params import ReferenceDesignParams
 from .simulation import CapsuleSimulation
 
 
@@ -23,25 +25,25 @@ def scenario_reference(
     threshold). The design settings are the ``[reference]`` section's; the cache file is named
     by a hash of the ``entry``, ``vehicle`` and ``atmosphere`` sections, the switch load and
     the design settings."""
-    e, ref = config["entry"], config["reference"]
-    chute = jnp.asarray(e["chute_altitude_km"] * 1e3, dtype=jnp.float64)
+    ref = from_scenario(ReferenceDesignParams, config)
     problem = NominalProblem(
         model=EntryModel(sim.vehicle, sim.earth, sim.atmosphere),
         entry=entry_state_from_conditions(sim.entry, sim.earth),
         target_fixed=sim.target_fixed,
         kepler_load_g=jnp.asarray(switch_load_g, dtype=jnp.float64),
-        chute_altitude_m=chute,
-        v_end_mps=jnp.asarray(ref["v_end_mps"], dtype=jnp.float64),
+        chute_altitude_m=sim.chute_altitude_m,
+        v_end_mps=jnp.asarray(ref.v_end_mps, dtype=jnp.float64),
     )
+    # the problem named in file units (the cache file's name: keep it as it is)
     description = {
-        "entry": e,
+        "entry": config["entry"],
         "vehicle": config["vehicle"],
         "atmosphere": config["atmosphere"],
         "kepler_load_g": switch_load_g,
-        "v_end_mps": ref["v_end_mps"],
+        "v_end_mps": ref.v_end_mps,
     }
     reference, _ = reference_for(
-        problem, description, w_margin=ref["w_margin"], steps=ref["design_steps"]
+        problem, description, w_margin=ref.w_margin, steps=ref.design_steps
     )
     return reference
 

@@ -17,7 +17,6 @@ accelerometer measurement and the outcome; the guidance is a member of the
 :class:`~gnc_jax.guidance.entry.base.EntryGuidanceContext` of :func:`guidance_context`).
 """
 
-import math
 from typing import NamedTuple
 
 import equinox as eqx
@@ -57,129 +56,10 @@ from ...guidance.entry.base import (
     hermite_state,
 )
 from ...integrate import rk4_step
-from ...params import from_scenario, param
 from ...root_finding import RootStatus
 from ..loop import with_status
-
-THIRD = 1.0 / 3.0  # the scenario gives 3-sigma values
-
-
-def _sigma_deg(x):
-    return math.radians(x) * THIRD
-
-
-def _sigma_km(x):
-    return x * 1e3 * THIRD
-
-
-def _sigma_pct(x):
-    return x / 100 * THIRD
-
-
-class CapsuleDispersions(eqx.Module):
-    """1-sigma dispersions, SI; the ``[dispersions]`` section gives 3-sigma values (seed 003
-    Table 2; the mass is uniform within ± its half width) and is derived from this class."""
-
-    speed_mps: Scalar = param(
-        100.0,
-        toml="speed_mps",
-        section="dispersions",
-        scale=THIRD,
-        lo=0.0,
-        hi=2000.0,
-        units="m/s",
-        doc="3-sigma entry speed",
-    )
-    fpa_rad: Scalar = param(
-        0.2,
-        toml="fpa_deg",
-        section="dispersions",
-        convert=_sigma_deg,
-        lo=0.0,
-        hi=5.0,
-        units="deg",
-        doc="3-sigma entry flight-path angle",
-    )
-    heading_rad: Scalar = param(
-        0.5,
-        toml="heading_deg",
-        section="dispersions",
-        convert=_sigma_deg,
-        lo=0.0,
-        hi=10.0,
-        units="deg",
-        doc="3-sigma entry heading",
-    )
-    downrange_m: Scalar = param(
-        100.0,
-        toml="downrange_km",
-        section="dispersions",
-        convert=_sigma_km,
-        lo=0.0,
-        hi=2000.0,
-        units="km",
-        doc="3-sigma entry point along track",
-    )
-    altitude_m: Scalar = param(
-        1.0,
-        toml="altitude_km",
-        section="dispersions",
-        convert=_sigma_km,
-        lo=0.0,
-        hi=50.0,
-        units="km",
-        doc="3-sigma entry altitude",
-    )
-    crossrange_m: Scalar = param(
-        100.0,
-        toml="crossrange_km",
-        section="dispersions",
-        convert=_sigma_km,
-        lo=0.0,
-        hi=2000.0,
-        units="km",
-        doc="3-sigma entry point across track",
-    )
-    lift_frac: Scalar = param(
-        20.0,
-        toml="cl_pct",
-        section="dispersions",
-        convert=_sigma_pct,
-        lo=0.0,
-        hi=90.0,
-        units="%",
-        doc="3-sigma lift coefficient",
-    )
-    drag_frac: Scalar = param(
-        20.0,
-        toml="cd_pct",
-        section="dispersions",
-        convert=_sigma_pct,
-        lo=0.0,
-        hi=90.0,
-        units="%",
-        doc="3-sigma drag coefficient",
-    )
-    density_frac: Scalar = param(
-        30.0,
-        toml="density_pct",
-        section="dispersions",
-        convert=_sigma_pct,
-        lo=0.0,
-        hi=90.0,
-        units="%",
-        doc="3-sigma atmospheric density",
-    )
-    mass_frac_half_width: Scalar = param(
-        5.0,
-        toml="mass_pct",
-        section="dispersions",
-        convert=lambda x: x / 100,
-        lo=0.0,
-        hi=50.0,
-        units="%",
-        doc="uniform half-width (not 3-sigma)",
-    )
+from .dispersions import CapsuleDispersions
+from .params import CapsuleParams, capsule_params, loop_counts
 
 
 class CapsuleSimulation(eqx.Module):
@@ -549,43 +429,17 @@ def _outcome(
     )
 
 
-def _f64(x):
-    return jnp.asarray(x, dtype=jnp.float64)
+def nominal_models(p: CapsuleParams):
+    """Earth, nominal vehicle and atmosphere, and the nominal entry interface of the
+    parameters ``p`` (the envelope's open-loop flights use the same models)."""
+    return EarthModel(), p.vehicle.entry_vehicle(), p.atmosphere.atmosphere(), p.entry.conditions()
 
 
-def _nominal(cfg: dict):
-    """Earth, nominal vehicle and atmosphere, and the nominal entry interface."""
-    e, v, a = cfg["entry"], cfg["vehicle"], cfg["atmosphere"]
-    rad = math.radians
-    vehicle = EntryVehicle(
-        mass_kg=v["mass_kg"],
-        reference_area_m2=v["area_m2"],
-        lift_coefficient=v["cl"],
-        drag_coefficient=v["cd"],
-        nose_radius_m=v["nose_radius_m"],
-    )
-    atmosphere = Atmosphere(
-        model=a["model"], rho0=a["rho0_kgm3"], scale_height_m=a["scale_height_km"] * 1e3
-    )
-    entry = EntryConditions(
-        _f64(e["altitude_km"] * 1e3),
-        _f64(e["speed_kmps"] * 1e3),
-        _f64(rad(e["fpa_deg"])),
-        _f64(rad(e["azimuth_deg"])),
-        _f64(rad(e["longitude_deg"])),
-        _f64(rad(e["latitude_deg"])),
-    )
-    return EarthModel(), vehicle, atmosphere, entry
-
-
-nominal_models = _nominal  # public name: the envelope's open-loop flights use the same models
-
-
-def _target(cfg: dict, earth, entry) -> Vector3:
+def target_direction(p: CapsuleParams, earth: EarthModel, entry: EntryConditions) -> Vector3:
     """The target (unit vector, Earth-fixed): ``entry.range_km`` along the entry azimuth."""
     y0 = entry_state_from_conditions(entry, earth)
     return destination(
-        unit(y0.r), entry.azimuth, cfg["entry"]["range_km"] * 1e3 / float(earth.equatorial_radius_m)
+        unit(y0.r), entry.azimuth, p.entry.range_m / float(earth.equatorial_radius_m)
     )
 
 
@@ -598,29 +452,23 @@ def build(scenario) -> CapsuleSimulation:
 
 def build_from_config(cfg: dict) -> CapsuleSimulation:
     """:func:`build` from a validated configuration (no guidance law, no reference design)."""
-    e, act, g, s = cfg["entry"], cfg["actuator"], cfg["guidance"], cfg["simulation"]
-    earth, vehicle, atmosphere, entry = _nominal(cfg)
-    target = _target(cfg, earth, entry)
-    rad = math.radians
-    sim = CapsuleSimulation(
+    p = capsule_params(cfg)
+    earth, vehicle, atmosphere, entry = nominal_models(p)
+    counts = loop_counts(p.simulation, p.guidance)
+    return CapsuleSimulation(
         entry=entry,
         vehicle=vehicle,
         earth=earth,
         atmosphere=atmosphere,
-        actuator=BankActuator(
-            max_rate=rad(act["max_rate_dps"]),
-            max_acceleration=rad(act["max_accel_dps2"]),
-            way=act["reversal"],
-        ),
-        dispersions=from_scenario(CapsuleDispersions, cfg),
-        target_fixed=target,
-        ratio_filter_gain=_f64(g["ratio_filter_gain"]),
-        hold_bank_rad=_f64(rad(g["hold_bank_deg"])),
-        chute_altitude_m=_f64(e["chute_altitude_km"] * 1e3),
-        miss_limit_m=_f64(s["miss_limit_km"] * 1e3),
-        dt_s=float(s["dt_s"]),
-        substeps=int(round(s["control_dt_s"] / s["dt_s"])),
-        n_control=int(math.ceil(s["max_time_s"] / s["control_dt_s"])),
-        pc_every=int(round(g["pc_period_s"] / s["control_dt_s"])),
+        actuator=p.actuator.bank_actuator(),
+        dispersions=p.dispersions,
+        target_fixed=target_direction(p, earth, entry),
+        ratio_filter_gain=p.guidance.ratio_filter_gain,
+        hold_bank_rad=p.guidance.hold_bank_rad,
+        chute_altitude_m=p.entry.chute_altitude_m,
+        miss_limit_m=p.simulation.miss_limit_m,
+        dt_s=counts.dt_s,
+        substeps=counts.substeps,
+        n_control=counts.n_control,
+        pc_every=counts.pc_every,
     )
-    return sim
