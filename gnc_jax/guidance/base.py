@@ -22,7 +22,7 @@ Every system with guidance has a *family base*: an abstract subclass of
 
 import abc
 import dataclasses
-from typing import ClassVar, NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -57,6 +57,22 @@ class AbstractGuidanceLaw(eqx.Module):
 
     @abc.abstractmethod
     def step(self, state, nav, t, ctx): ...
+
+    # ---- what the figures and reports draw: the law says it, nobody reads its fields ----
+    def describe(self) -> str:
+        """One line naming the law and its gains, for figure titles."""
+        return getattr(self, "law_name", type(self).__name__)
+
+    def switching_levels(self) -> dict[str, float]:
+        """Command levels at which the law switches its engine on or off, ``{label: value}``
+        in the command's units, drawn on command figures; ``{}`` when it has none."""
+        return {}
+
+    def state_curves(self, state_trace) -> dict[str, Any]:
+        """Time series of the law's own state worth drawing against a run's trace,
+        ``{label: array}``, from the law state recorded along the run (``state_trace``, its
+        fields with time on the first axis); ``{}`` when there are none."""
+        return {}
 
     def relax(self, temperature=None):
         """The law with its discontinuous logic replaced by its smooth relaxation (for

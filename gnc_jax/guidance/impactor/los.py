@@ -134,6 +134,17 @@ class LOSSwitchingCurveGuidance(AbstractImpactorGuidance):
                 "allowed: 0 < k2 <= k1"
             )
 
+    def describe(self) -> str:
+        return f"LOS switching curves, k1 = {float(self.k1):g}, k2 = {float(self.k2):g}"
+
+    def state_curves(self, state_trace) -> dict:
+        """|omega| against its switching curves (seed 000 Fig. 3), rad/s."""
+        return {
+            "|ω| (navigation), rad/s": state_trace.omega,
+            "ω_open (k1), rad/s": state_trace.omega_open,
+            "ω_close (k2), rad/s": state_trace.omega_close,
+        }
+
     def init(self, nav, ctx: ImpactorGuidanceContext) -> LOSGuidanceState:
         z = jnp.zeros(())
         return self.plan(LOSGuidanceState(z, z, z, z, z), nav, 0.0, ctx)

@@ -185,6 +185,13 @@ class AugmentedPNGuidance(AbstractInterceptGuidance):
             a_off_mps2=f(section["trigger_off"] * scale),
         )
 
+    def describe(self) -> str:
+        return f"N0 = {float(self.n0):g}, k = {float(self.k):g}"
+
+    def switching_levels(self) -> dict[str, float]:
+        """The Schmitt trigger's levels on |A| (eq. 12), m/s^2."""
+        return {"a_on": float(self.a_on_mps2), "a_off": float(self.a_off_mps2)}
+
     def init(self, nav: PNNavigation, ctx: PNGuidanceContext) -> APNState:
         z = jnp.zeros(())
         return APNState(z, jnp.zeros(3), jnp.asarray(self.n0, float))

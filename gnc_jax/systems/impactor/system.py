@@ -96,19 +96,20 @@ def _dv_and_firings(plt, summary, runs, ok, scenario):
     return fig
 
 
-def _engine_trace(plt, trace, scenario):
-    """Seed 000 Fig. 3 for run 0 (a switching-curve law: |omega| against its curves)."""
+def _engine_trace(plt, trace, scenario, law):
+    """Run 0's engine against the law's own curves (for the LOS law its switching curves,
+    seed 000 Fig. 3), as the law states them (``state_curves``)."""
     t = trace.t_s
     fig, ax = plt.subplots(figsize=(9, 4.5))
-    ls = trace.law_state
-    if hasattr(ls, "omega_open"):  # a switching-curve law: its curves against |omega|
-        ax.semilogy(t, ls.omega, lw=1, label="|ω| (navigation)")
-        ax.semilogy(t, ls.omega_open, lw=1, label="ω_open (k1)")
-        ax.semilogy(t, ls.omega_close, lw=1, label="ω_close (k2)")
-        ax.set_ylabel("LOS rate (rad/s)")
-        lo = np.nanmin(np.where(ls.omega > 0, ls.omega, np.nan))
+    curves = law.state_curves(trace.law_state)
+    if curves:
+        for label, values in curves.items():
+            ax.semilogy(t, values, lw=1, label=label)
+        first = np.asarray(next(iter(curves.values())))
+        ax.set_ylabel("law state")
+        lo = np.nanmin(np.where(first > 0, first, np.nan))
         ax.set_ylim(max(lo, 1e-12), None)
-        title = "LOS rate and switching curves (seed 000 Fig. 3), run 0"
+        title = f"the law's curves ({law.describe()}), run 0"
     else:
         ax.set_ylabel("throttle")
         title = "burns of the predictive law, run 0"
@@ -136,7 +137,8 @@ def impactor_figures(summary, runs, scenario, out: pathlib.Path, traces) -> list
     save(_b_plane_points(plt, summary, runs, ok, scenario), "b_plane.png")
     save(_dv_and_firings(plt, summary, runs, ok, scenario), "dv_firings.png")
     _, trace = traces["run0"]
-    save(_engine_trace(plt, trace, scenario), "engine_trace.png")
+    _, law = ImpactorSystem().build(scenario)
+    save(_engine_trace(plt, trace, scenario, law), "engine_trace.png")
     files.append(_centroid_frames_figure(scenario, trace, out))
     return files
 

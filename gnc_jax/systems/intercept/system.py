@@ -57,14 +57,14 @@ def _pn_command_panel(ax, trace, law, title):
         label = "|A| (eq. 11)"
     on = trace.engine_on > 0.5
     ax.plot(t_h, a, lw=0.8, color="C0", label=label)
-    a_on, a_off = float(law.a_on_mps2), float(law.a_off_mps2)
-    for sign in (1, -1) if planar else (1,):
-        ax.axhline(sign * a_on, color="C3", ls="--", lw=0.8)
-        ax.axhline(sign * a_off, color="C2", ls=":", lw=0.8)
-    ax.plot([], [], "C3--", lw=0.8, label=f"a_on = {a_on:.3g} m/s²")
-    ax.plot([], [], "C2:", lw=0.8, label=f"a_off = {a_off:.3g} m/s²")
-    ax.set_yscale("symlog", linthresh=a_off)
-    ymax = max(np.abs(a).max(), a_on) * 1.5
+    levels = law.switching_levels()  # the law's own: e.g. the APN trigger's a_on, a_off
+    for (name, level), style in zip(levels.items(), ("C3--", "C2:", "C4-.", "C5-.")):
+        for sign in (1, -1) if planar else (1,):
+            ax.axhline(sign * level, color=style[:2], ls=style[2:], lw=0.8)
+        ax.plot([], [], style, lw=0.8, label=f"{name} = {level:.3g} m/s²")
+    top = max([np.abs(a).max(), *levels.values()])
+    ax.set_yscale("symlog", linthresh=min(levels.values(), default=max(top, 1e-12) * 1e-3))
+    ymax = top * 1.5
     ax.set_ylim(-ymax if planar else 0.0, ymax)
     ax.vlines(t_h[on], -ymax if planar else 0.0, ymax, color="C1", alpha=0.25, lw=0.6)
     ax.plot([], [], color="C1", alpha=0.5, label=f"engine pulses ({on.sum()} steps)")
@@ -123,8 +123,7 @@ def intercept_figures(summary, runs, scenario, out: pathlib.Path, traces) -> lis
     _, law = InterceptSystem().build(scenario)
     _, trace = traces["run0"]
     fig, ax = plt.subplots(figsize=(10, 4.5))
-    g = scenario.config["guidance"]["apn"]
-    _pn_command_panel(ax, trace, law, f"{scenario.name}, run 0: N0 = {g['n0']:g}, k = {g['k']:g}")
+    _pn_command_panel(ax, trace, law, f"{scenario.name}, run 0: {law.describe()}")
     ax.set_xlabel("mission time (h)")
     save(fig, "command_trace.png")
 
