@@ -85,6 +85,17 @@ class ImpactorErrors(eqx.Module):
         units="urad",
         doc="attitude determination random error (per image)",
     )
+    camera_misalignment_rad: Scalar = param(
+        0.0,
+        toml="camera_misalignment_urad",
+        section="errors",
+        scale=URAD,
+        lo=0.0,
+        hi=1e5,
+        units="urad",
+        doc="camera boresight misalignment from the attitude reference, per axis: drawn once "
+        "per run, rotates every image's line of sight; not known to the filter",
+    )
     accel_bias_mps2: Scalar = param(
         50.0,
         toml="accel_bias_ug",

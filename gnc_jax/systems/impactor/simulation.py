@@ -71,6 +71,8 @@ class ImpactorSimulation(eqx.Module):
         consider_attitude_bias: 1.0 to add the attitude-bias rotation to the filter's initial
             covariance (:func:`attitude_bias_covariance`), 0.0 to ignore it.
         n_images, steps_per_image: loop sizes (static); coast_steps: RK4 steps of the final coast.
+        camera_misaligned: whether the camera misalignment is drawn and applied (static, as the
+            dynamics' terms: computed only when its sigma is nonzero).
         measurement: the LOS measurement front end (a registered
             :class:`~gnc_jax.navigation.measurements.AbstractMeasurement`, chosen by
             ``navigation.measurement``): Gaussian LOS noise or rendered frames.
@@ -92,6 +94,7 @@ class ImpactorSimulation(eqx.Module):
     n_images: int = eqx.field(static=True)
     steps_per_image: int = eqx.field(static=True)
     coast_steps: int = eqx.field(static=True, default=4)
+    camera_misaligned: bool = eqx.field(static=True, default=False)
     measurement: AbstractMeasurement = eqx.field(
         default_factory=lambda: GaussianLOSMeasurement(jnp.asarray(10e-6))
     )
@@ -183,8 +186,8 @@ class _Carry(NamedTuple):
 
 # Random streams (gnc_jax._random): each kind of draw has its own stream, so adding a kind
 # never changes the others. A run draws only what it uses, at the rate it is used:
-# * once per run: delivery, knowledge (position, velocity), attitude bias, accelerometer bias
-#   (3 each);
+# * once per run: delivery, knowledge (position, velocity), attitude bias, accelerometer bias,
+#   camera misalignment (3 each);
 # * once per image i (stream _IMAGES, index i), IMAGE_DRAWS standard normals:
 #   [0:2] image-processing noise, [2:5] attitude control, [5:8] attitude knowledge;
 # * once per run (stream _BURNS), a table of what only burns use, BURN_DRAWS normals per row:
@@ -196,7 +199,7 @@ class _Carry(NamedTuple):
 # few per cent of the image intervals, yet every vmapped lane computes whatever any lane might
 # use: drawing the burns' normals with each image (18 normals instead of 8) cost more than
 # the whole table, and one row fetched per image costs less than fetching separate ones.
-_DELIVERY, _KNOW_POS, _KNOW_VEL, _ATT_BIAS, _ACC_BIAS, _IMAGES, _BURNS = range(7)
+_DELIVERY, _KNOW_POS, _KNOW_VEL, _ATT_BIAS, _ACC_BIAS, _IMAGES, _BURNS, _MISALIGNMENT = range(8)
 IMAGE_DRAWS = 8
 BURN_DRAWS = 14
 # A run with more burning intervals than the table's rows reuses them cyclically. A third or
@@ -281,10 +284,20 @@ def initial_conditions(sim: ImpactorSimulation, key: PRNGKeyArray):
     return truth, NavEstimate(x_hat, p0), draws
 
 
-def camera_attitudes(sim: ImpactorSimulation, r_hat: Vector3, attitude_bias_rad, w) -> tuple:
+def camera_misalignment(sim: ImpactorSimulation, key: PRNGKeyArray) -> Vector3:
+    """The run's camera misalignment (rad, a rotation vector): fixed for the run, its own
+    random stream, so the other draws do not change with it."""
+    return sim.errors.camera_misalignment_rad * stream_normal(key, _MISALIGNMENT)
+
+
+def camera_attitudes(
+    sim: ImpactorSimulation, r_hat: Vector3, attitude_bias_rad, w, misalignment_rad=None
+) -> tuple:
     """``(c_true, c_est)``, each the three rows of a camera attitude C_cI: the camera pointed
-    at the estimated target direction with attitude-control error (``w[2:5]``), and the
-    attitude the navigation believes (bias + knowledge error ``w[5:8]``).
+    at the estimated target direction with attitude-control error (``w[2:5]``) and rotated by
+    its misalignment ``misalignment_rad`` (None: none), and the attitude the navigation
+    believes (bias + knowledge error ``w[5:8]``, of the attitude reference: the filter does
+    not know the misalignment).
 
     The attitude errors' rotations come from power series (``small_rotation_entries``: no
     trigonometry), composed row by row.
@@ -293,7 +306,10 @@ def camera_attitudes(sim: ImpactorSimulation, r_hat: Vector3, attitude_bias_rad,
     cmd = camera_axes(-r_hat, sim.context.c_bi[2])
     c_true = rotate_rows(small_rotation_entries(err.attitude_control_rad * w[2:5]), cmd)
     knowledge = attitude_bias_rad + err.attitude_noise_rad * w[5:8]
-    return c_true, rotate_rows(small_rotation_entries(knowledge), c_true)
+    c_est = rotate_rows(small_rotation_entries(knowledge), c_true)
+    if misalignment_rad is not None:
+        c_true = rotate_rows(small_rotation_entries(misalignment_rad), c_true)
+    return c_true, c_est
 
 
 def image_update(
@@ -454,7 +470,9 @@ def _control_step(sim: ImpactorSimulation, law, accel_bias, record, carry: _Carr
     return new, rec
 
 
-def _image_step(sim: ImpactorSimulation, law, key, draws, burns, record, carry: _Carry, i):
+def _image_step(
+    sim: ImpactorSimulation, law, key, draws, burns, misalignment, record, carry: _Carry, i
+):
     """One image interval: image -> EKF update -> guidance ``plan`` -> control steps ->
     accelerometer noise -> covariance propagation."""
     ctx, err = sim.context, sim.errors
@@ -471,7 +489,7 @@ def _image_step(sim: ImpactorSimulation, law, key, draws, burns, record, carry: 
     # nothing (the Gaussian one).
     def draws_and_attitudes(r_hat):
         w = image_draws(key, i)
-        return w, camera_attitudes(sim, r_hat, bias, w)
+        return w, camera_attitudes(sim, r_hat, bias, w, misalignment)
 
     w, attitudes = computed_once(draws_and_attitudes, t, carry.r_hat)
     gain, meas = computed_once(
@@ -638,7 +656,8 @@ def simulate(
         images_used=jnp.zeros((), jnp.int32),
         innovations_outside=jnp.zeros((), jnp.int32),
     )
-    image_step = functools.partial(_image_step, sim, law, key, draws, burns, record)
+    misalignment = camera_misalignment(sim, key) if sim.camera_misaligned else None
+    image_step = functools.partial(_image_step, sim, law, key, draws, burns, misalignment, record)
     carry, rec = jax.lax.scan(image_step, carry0, jnp.arange(sim.n_images))
     outcome = _outcome(sim, carry, draws)
     # A run whose navigation was lost ends nav_lost, ahead of what it then does to its fuel.
@@ -700,6 +719,7 @@ def build(scenario) -> ImpactorSimulation:
         n_images=times.n_images,
         steps_per_image=times.steps_per_image,
         coast_steps=dy.coast_steps,
+        camera_misaligned=float(p.errors.camera_misalignment_rad) != 0.0,
         measurement=measurement_class(p.navigation.measurement).from_setup(setup),
         camera=setup.camera,
         target=setup.target,
