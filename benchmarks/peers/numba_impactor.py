@@ -132,6 +132,8 @@ def problem(scenario):
         raise ValueError(f"{scenario.name}: the numba peer transcribes the hard LOS law only")
     if not isinstance(sim.measurement, GaussianLOSMeasurement) or sim.measurement.planar:
         raise ValueError(f"{scenario.name}: the numba peer transcribes the Gaussian LOS front end")
+    if float(sim.errors.camera_misalignment_rad) != 0.0:
+        raise ValueError(f"{scenario.name}: the numba peer has no camera misalignment")
     f = lambda x: np.asarray(x, dtype=np.float64)  # noqa: E731
     ctx, err, dyn = sim.context, sim.errors, sim.dynamics
     prm = np.zeros(N_PARAMS)

@@ -18,6 +18,7 @@ from .measurements import (
     GaussianLOSMeasurement,
     ImageMeasurement,
     Measurement,
+    MeasurementSetup,
     measurement_class,
     register_measurement,
 )
@@ -49,6 +50,7 @@ __all__ = [
     "GaussianLOSMeasurement",
     "ImageMeasurement",
     "Measurement",
+    "MeasurementSetup",
     "measurement_class",
     "register_measurement",
     "Centroid",

@@ -23,7 +23,9 @@ from gnc_jax.navigation import (
     register_measurement,
     update_los,
 )
-from gnc_jax.systems.impactor.schema import SCHEMA
+from gnc_jax.params import schema_of
+from gnc_jax.systems.impactor.params import ImpactorParams, NavigationParams
+from gnc_jax.systems.impactor.simulation import measurement_setup
 
 ALL_MEASUREMENTS = sorted(AbstractMeasurement.measurements)
 
@@ -88,7 +90,11 @@ def test_rejected_measurement_leaves_the_estimate_unchanged():
 
 
 def test_registry_holds_the_schema_front_ends():
-    assert set(ALL_MEASUREMENTS) == set(SCHEMA["navigation"]["measurement"].choices)
+    """The declared choices of ``navigation.measurement`` are the packaged front ends, and the
+    impactor's schema offers every registered one."""
+    declared = schema_of(NavigationParams, "navigation")["measurement"].choices
+    offered = gj.get_system("impactor").schema()["navigation"]["measurement"].choices
+    assert set(ALL_MEASUREMENTS) == set(declared) == set(offered)
     for name in ALL_MEASUREMENTS:
         assert measurement_class(name).measurement_name == name
     with pytest.raises(ValueError, match="unknown measurement"):
@@ -110,7 +116,7 @@ def test_every_front_end_measures_the_true_los(name, key):
     """Each registered front end, built from the packaged image scenario, returns the true
     angles within a few times the 10 urad image-processing error, under jit."""
     config = gj.load_scenario("autonav-predictive").config
-    front_end = measurement_class(name).from_config(config)
+    front_end = measurement_class(name).from_setup(measurement_setup(ImpactorParams.of(config)))
     exposure, nav, predicted = _scene()
     noise = jax.random.normal(key, (2,))
     meas = jax.jit(lambda *args: front_end(*args))(exposure, nav, predicted, noise, key)

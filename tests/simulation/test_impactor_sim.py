@@ -125,3 +125,85 @@ def test_image_update_equals_the_dense_joseph_ekf_with_rodrigues_attitudes():
     assert np.linalg.norm(np.asarray(got_nav.x[:3] - nav.x[:3])) > 1.0
     cross = lambda p: np.asarray(p)[1, 1] + np.asarray(p)[2, 2]  # noqa: E731
     assert cross(got_nav.p) < 0.1 * cross(nav.p)
+
+
+def test_camera_misalignment_rotates_the_measured_los_only():
+    """``errors.camera_misalignment_urad``: the image is taken through the camera frame rotated
+    by the run's drawn misalignment (against scipy's rotation of the camera frame), while the
+    filter's predicted angles, through the attitude it believes, do not see it."""
+    import jax
+    import jax.numpy as jnp
+    from scipy.spatial.transform import Rotation
+
+    from gnc_jax.navigation.camera import camera_attitude
+    from gnc_jax.navigation.packed_ekf import pack
+    from gnc_jax.systems.impactor.simulation import (
+        camera_attitudes,
+        camera_misalignment,
+        image_update,
+        initial_conditions,
+    )
+
+    quiet = [  # no other attitude or centroiding error: the misalignment alone moves the LOS
+        "errors.image_processing_urad=0.0",
+        "errors.attitude_control_urad=0.0",
+        "errors.attitude_noise_urad=0.0",
+        "errors.attitude_bias_urad=0.0",
+    ]
+    scenario = gj.load_scenario(
+        "deep-impact-los", overrides=quiet + ["errors.camera_misalignment_urad=500.0"]
+    )
+    sim, _ = gj.build(scenario)
+    key = jax.random.key(7)
+    truth, nav, _ = initial_conditions(sim, key)
+    m = np.asarray(camera_misalignment(sim, key))
+    assert 50e-6 < np.linalg.norm(m) < 3e-3  # a 500 urad 1-sigma per axis draw
+    w, zero = jnp.zeros(8), jnp.zeros(3)
+    attitudes = camera_attitudes(sim, nav.r, zero, w, jnp.asarray(m))
+    _, meas = image_update(sim, nav.r, nav.v, pack(nav.p), truth.r, attitudes, w[:2], key)
+    c_cmd = np.asarray(camera_attitude(-nav.r, sim.context.c_bi[2]))
+    los = -np.asarray(truth.r)
+    seen = Rotation.from_rotvec(np.array(m)).as_matrix() @ c_cmd @ los
+    np.testing.assert_allclose(meas.z, seen[:2] / seen[2], rtol=1e-9, atol=1e-15)
+    believed = c_cmd @ los  # the filter's attitude: the misalignment is not in it
+    np.testing.assert_allclose(np.stack(attitudes[1]), c_cmd, atol=1e-15)
+    offset = np.asarray(meas.z) - believed[:2] / believed[2]
+    # to first order the boresight moves by (m_y, -m_x): the LOS angles shift by that
+    np.testing.assert_allclose(offset, [m[1], -m[0]], rtol=0.05, atol=1e-3 * np.linalg.norm(m))
+
+
+def test_camera_misalignment_acts_as_an_unknown_attitude_bias(monkeypatch):
+    """Run for run, a camera misaligned by -b flies as an attitude reference biased by b that
+    the filter does not consider (both rotate every measured LOS against the attitude the
+    filter believes), to second order in b: the misalignment drawn from the attitude bias's
+    normals (its stream id patched), against the attitude-bias error model."""
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+
+    from gnc_jax.systems.impactor import simulation
+
+    sigma = 300e-6  # rad: misses of hundreds of metres, against tens without it
+    unknown = SHORT + ["navigation.consider_attitude_bias=false", "errors.attitude_bias_urad=0.0"]
+    base, law = gj.build(gj.load_scenario("deep-impact-los", overrides=unknown))
+    biased = eqx.tree_at(lambda s: s.errors.attitude_bias_rad, base, jnp.asarray(sigma))
+    mis = gj.build(
+        gj.load_scenario(
+            "deep-impact-los", overrides=unknown + ["errors.camera_misalignment_urad=1"]
+        )
+    )[0]
+    mis = eqx.tree_at(lambda s: s.errors.camera_misalignment_rad, mis, jnp.asarray(-sigma))
+    assert mis.camera_misaligned and not base.camera_misaligned
+    keys = jax.vmap(lambda i: gj.run_key(0, i))(jnp.arange(8))
+    run = jax.jit(jax.vmap(lambda s, k: simulation.simulate(s, law, k)[0], in_axes=(None, 0)))
+    monkeypatch.setattr(simulation, "_MISALIGNMENT", simulation._ATT_BIAS)
+    a, b, c = run(base, keys), run(biased, keys), run(mis, keys)
+    np.testing.assert_array_equal(b.status, c.status)
+    for name in ("miss_t_m", "miss_r_m", "nav_position_error_m", "dv_mps"):
+        x, y, z = (np.asarray(getattr(o, name)) for o in (a, b, c))
+        assert np.max(np.abs(z - y)) <= 1e-3 * np.max(np.abs(y - x)), name
+    rms = lambda o: np.sqrt(np.mean(np.asarray(o.miss_m) ** 2))  # noqa: E731
+    assert rms(c) > 3 * rms(a)
+    # the runs' other draws come from their own streams
+    for name in ("delivery_error_m", "knowledge_position_error_m", "accel_bias_mps2"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(c, name), err_msg=name)

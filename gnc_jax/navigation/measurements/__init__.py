@@ -4,11 +4,12 @@ from .base import (
     AbstractMeasurement,
     Exposure,
     Measurement,
+    MeasurementSetup,
     measurement_class,
     register_measurement,
 )
 from .gaussian import GaussianLOSMeasurement
-from .image import ImageMeasurement, camera_model, target_model
+from .image import ImageMeasurement
 
 __all__ = [
     "AbstractMeasurement",
@@ -18,6 +19,5 @@ __all__ = [
     "register_measurement",
     "GaussianLOSMeasurement",
     "ImageMeasurement",
-    "camera_model",
-    "target_model",
+    "MeasurementSetup",
 ]

@@ -13,6 +13,9 @@ image with
 * ``noise``: two standard normals the simulator drew for this image (its random-stream
   layout), ``key``: a key for front ends that draw more (the renderer).
 
+A front end is built from a :class:`MeasurementSetup`: the scenario's camera, target and
+image-processing error in SI units, which the system builds from its declared parameters.
+
 A front end joins the family by :func:`register_measurement`; a scenario chooses one by name::
 
     @register_measurement("image")
@@ -24,8 +27,9 @@ from typing import ClassVar, NamedTuple
 
 import equinox as eqx
 
-from ..._types import Array, Bool, Float, Matrix3, PRNGKeyArray, Vector3
+from ..._types import Array, Bool, Float, Matrix3, PRNGKeyArray, Scalar, Vector3
 from ..ekf import MeasurementPrediction, NavEstimate
+from ..render import CameraModel, TargetModel
 
 
 class Exposure(NamedTuple):
@@ -42,6 +46,15 @@ class Measurement(NamedTuple):
     z: Float[Array, "2"]  # measured tangent-plane angles, rad
     valid: Bool[Array, ""]  # False: no usable measurement (no filter update)
     z_true: Float[Array, "2"]  # true angles in the true camera frame (error statistics), rad
+
+
+class MeasurementSetup(NamedTuple):
+    """What a front end is built from: a scenario's values in SI units."""
+
+    camera: CameraModel  # camera and detector
+    target: TargetModel  # the target's shape, orientation and lighting
+    image_processing_rad: Scalar  # 1-sigma centroiding error per angle (the filter's model)
+    phase_correction: Scalar  # 1.0: remove the predicted centre-of-brightness offset
 
 
 class AbstractMeasurement(eqx.Module):
@@ -72,8 +85,8 @@ class AbstractMeasurement(eqx.Module):
 
     @classmethod
     @abc.abstractmethod
-    def from_config(cls, config: dict) -> "AbstractMeasurement":
-        """The front end of a validated impactor scenario (SI units)."""
+    def from_setup(cls, setup: MeasurementSetup) -> "AbstractMeasurement":
+        """The front end of a scenario, from its SI values."""
 
 
 def register_measurement(name: str):
@@ -103,6 +116,7 @@ __all__ = [
     "AbstractMeasurement",
     "Exposure",
     "Measurement",
+    "MeasurementSetup",
     "measurement_class",
     "register_measurement",
 ]

@@ -11,7 +11,13 @@ import jax.numpy as jnp
 from ..._types import Array, Float, PRNGKeyArray, Scalar
 from ..camera import los_angles
 from ..ekf import MeasurementPrediction, NavEstimate
-from .base import AbstractMeasurement, Exposure, Measurement, register_measurement
+from .base import (
+    AbstractMeasurement,
+    Exposure,
+    Measurement,
+    MeasurementSetup,
+    register_measurement,
+)
 
 
 @register_measurement("noise")
@@ -39,9 +45,8 @@ class GaussianLOSMeasurement(AbstractMeasurement):
         return Measurement(z, jnp.ones((), bool), z_true)
 
     @classmethod
-    def from_config(cls, config: dict) -> "GaussianLOSMeasurement":
-        sigma = config["errors"]["image_processing_urad"] * 1e-6
-        return cls(jnp.asarray(sigma, dtype=jnp.float64))
+    def from_setup(cls, setup: MeasurementSetup) -> "GaussianLOSMeasurement":
+        return cls(setup.image_processing_rad)
 
 
 __all__ = ["GaussianLOSMeasurement"]

@@ -13,9 +13,9 @@ import math
 
 import jax.numpy as jnp
 
-from ..._types import Array, Float, PRNGKeyArray, Scalar, Vector3
+from ..._types import Array, Float, PRNGKeyArray, Scalar
 from ...schema import ScenarioError
-from ..camera import los_angles, small_rotation
+from ..camera import los_angles
 from ..centroid import extract_centroid
 from ..ekf import MeasurementPrediction, NavEstimate
 from ..render import (
@@ -26,7 +26,13 @@ from ..render import (
     render_frame,
     roi_to_tangent,
 )
-from .base import AbstractMeasurement, Exposure, Measurement, register_measurement
+from .base import (
+    AbstractMeasurement,
+    Exposure,
+    Measurement,
+    MeasurementSetup,
+    register_measurement,
+)
 
 
 @register_measurement("image")
@@ -81,48 +87,8 @@ class ImageMeasurement(AbstractMeasurement):
             )
 
     @classmethod
-    def from_config(cls, config: dict) -> "ImageMeasurement":
-        sun = jnp.asarray(config["dynamics"]["sun_direction"], dtype=jnp.float64)
-        return cls(
-            camera=camera_model(config["camera"]),
-            target=target_model(config["target"], sun / jnp.linalg.norm(sun)),
-            phase_correction=jnp.asarray(
-                1.0 if config["navigation"]["phase_correction"] else 0.0, dtype=jnp.float64
-            ),
-        )
+    def from_setup(cls, setup: MeasurementSetup) -> "ImageMeasurement":
+        return cls(setup.camera, setup.target, setup.phase_correction)
 
 
-def camera_model(cam: dict) -> CameraModel:
-    """The :class:`CameraModel` of a validated ``[camera]`` section (SI units)."""
-    f = lambda x: jnp.asarray(x, dtype=jnp.float64)  # noqa: E731
-    adc_max = 2.0 ** cam["adc_bits"] - 1.0
-    return CameraModel(
-        focal_length_m=f(cam["focal_length_m"]),
-        pixel_pitch_m=f(cam["pixel_pitch_um"] * 1e-6),
-        psf_sigma_px=f(cam["psf_sigma_px"]),
-        signal_e=f(cam["signal_e"]),
-        full_well_e=f(cam["full_well_e"]),
-        read_noise_e=f(cam["read_noise_e"]),
-        gain_e_per_dn=f(cam["full_well_e"] / adc_max),
-        bias_dn=f(cam["bias_dn"]),
-        adc_max_dn=f(adc_max),
-        roi_px=int(cam["roi_px"]),
-        window_px=int(cam["window_px"]),
-        samples=int(cam["samples"]),
-        label_iterations=int(cam["label_iterations"]),
-        max_bin_log2=int(cam["max_bin_log2"]),
-        max_exposure_gain=f(cam["max_exposure_gain"]),
-    )
-
-
-def target_model(tg: dict, sun_direction: Vector3) -> TargetModel:
-    """The :class:`TargetModel` of a validated ``[target]`` section, lit from ``sun_direction``."""
-    rot = [math.radians(a) for a in tg["orientation_deg"]]
-    return TargetModel(
-        semi_axes_m=jnp.asarray(tg["semi_axes_km"], dtype=jnp.float64) * 1e3,
-        c_bi=small_rotation(jnp.asarray(rot, dtype=jnp.float64)),
-        sun_direction=sun_direction,
-    )
-
-
-__all__ = ["ImageMeasurement", "camera_model", "target_model"]
+__all__ = ["ImageMeasurement"]

@@ -1,9 +1,10 @@
 """The impactor system (scenario kind ``impactor``): a small-body impactor's terminal phase
 (seeds 000 and 002).
 
-``schema`` its scenario sections, ``simulation`` one closed-loop run (truth, camera, EKF,
-guidance, engine), ``system`` the registered contract with its statistics and figures. Its
-guidance laws are the family :mod:`gnc_jax.guidance.impactor`.
+``params`` its scenario fields and ``errors`` its error sources (each declared once, with
+its SI value), ``schema`` their cross-field checks, ``simulation`` one closed-loop run
+(truth, camera, EKF, guidance, engine), ``system`` the registered contract with its
+statistics and figures. Its guidance laws are the family :mod:`gnc_jax.guidance.impactor`.
 """
 
 from .system import ImpactorSystem

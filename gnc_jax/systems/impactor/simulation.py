@@ -8,7 +8,6 @@ The run ends at the guidance cut-off; the truth then coasts to the B-plane.
 """
 
 import functools
-import math
 from typing import NamedTuple
 
 import equinox as eqx
@@ -19,9 +18,8 @@ from ..._numerics import V3, as_array, as_v3, computed_once, matmul, matvec3
 from ..._random import stream_key, stream_normal
 from ..._status import Status
 from ..._types import Array, Float, PRNGKeyArray, Scalar, Vector3
-from ...constants import AU_M, GM_SUN_M3S2
+from ...constants import GM_SUN_M3S2
 from ...dynamics.impactor import (
-    G0,
     Engine,
     ImpactorState,
     RelativeDynamics,
@@ -40,9 +38,8 @@ from ...navigation.measurements import (
     Exposure,
     GaussianLOSMeasurement,
     Measurement,
-    camera_model,
+    MeasurementSetup,
     measurement_class,
-    target_model,
 )
 from ...navigation.packed_ekf import (
     LOSGain,
@@ -55,119 +52,9 @@ from ...navigation.packed_ekf import (
     unpack,
 )
 from ...navigation.render import CameraModel, TargetModel
-from ...params import from_scenario, param
 from ..loop import flatten_trace, with_status
-from .schema import time_of_flight_s
-
-URAD = 1e-6  # file urad -> rad
-UG = 1e-6 * G0  # file micro-g -> m/s^2
-
-
-class ImpactorErrors(eqx.Module):
-    """1-sigma error sources (seed 000 Table 2), SI: angles in rad, accelerations in m/s^2.
-
-    Each field is declared once, with its scenario field: ``[errors]`` and the knowledge
-    fields of ``[navigation]`` are derived from this class (``systems.impactor``).
-    """
-
-    delivery_position_m: Scalar = param(
-        10.0,
-        toml="delivery_position_km",
-        section="errors",
-        scale=1e3,
-        lo=0.0,
-        hi=1e4,
-        units="km",
-        doc="1-sigma initial position delivery error, per axis",
-    )
-    knowledge_position_m: Float[Array, "3"] = param(
-        [150.0, 8.0, 8.0],
-        toml="knowledge_position_km",
-        section="navigation",
-        scale=1e3,
-        length=3,
-        lo=0.0,
-        units="km",
-        doc="1-sigma initial position knowledge along S, T, R",
-    )
-    knowledge_velocity_mps: Scalar = param(
-        0.1,
-        section="navigation",
-        lo=0.0,
-        hi=1e3,
-        units="m/s",
-        doc="1-sigma initial velocity knowledge per axis",
-    )
-    image_processing_rad: Scalar = param(
-        10.0,
-        toml="image_processing_urad",
-        section="errors",
-        scale=URAD,
-        lo=0.0,
-        hi=1e5,
-        units="urad",
-        doc="centroiding error of the noise front end (and the filter's model of it)",
-    )
-    attitude_control_rad: Scalar = param(
-        320.0,
-        toml="attitude_control_urad",
-        section="errors",
-        scale=URAD,
-        lo=0.0,
-        hi=1e5,
-        units="urad",
-        doc="camera and thrust pointing error",
-    )
-    attitude_bias_rad: Scalar = param(
-        100.0,
-        toml="attitude_bias_urad",
-        section="errors",
-        scale=URAD,
-        lo=0.0,
-        hi=1e5,
-        units="urad",
-        doc="attitude determination bias (constant per run)",
-    )
-    attitude_noise_rad: Scalar = param(
-        30.0,
-        toml="attitude_noise_urad",
-        section="errors",
-        scale=URAD,
-        lo=0.0,
-        hi=1e5,
-        units="urad",
-        doc="attitude determination random error (per image)",
-    )
-    accel_bias_mps2: Scalar = param(
-        50.0,
-        toml="accel_bias_ug",
-        section="errors",
-        scale=UG,
-        lo=0.0,
-        hi=1e6,
-        units="ug",
-        doc="accelerometer bias (constant per run)",
-    )
-    accel_noise_mps2: Scalar = param(
-        10.0,
-        toml="accel_noise_ug",
-        section="errors",
-        scale=UG,
-        lo=0.0,
-        hi=1e6,
-        units="ug",
-        doc="accelerometer white noise",
-    )
-    burn_magnitude_frac: Scalar = param(
-        2.0,
-        toml="burn_magnitude_pct",
-        section="errors",
-        convert=lambda pct: pct / 100.0,
-        lo=0.0,
-        hi=50.0,
-        units="%",
-        doc="burn execution (thrust magnitude) error, drawn per firing",
-    )
+from .errors import ImpactorErrors
+from .params import ImpactorParams, timeline
 
 
 class ImpactorSimulation(eqx.Module):
@@ -184,6 +71,8 @@ class ImpactorSimulation(eqx.Module):
         consider_attitude_bias: 1.0 to add the attitude-bias rotation to the filter's initial
             covariance (:func:`attitude_bias_covariance`), 0.0 to ignore it.
         n_images, steps_per_image: loop sizes (static); coast_steps: RK4 steps of the final coast.
+        camera_misaligned: whether the camera misalignment is drawn and applied (static, as the
+            dynamics' terms: computed only when its sigma is nonzero).
         measurement: the LOS measurement front end (a registered
             :class:`~gnc_jax.navigation.measurements.AbstractMeasurement`, chosen by
             ``navigation.measurement``): Gaussian LOS noise or rendered frames.
@@ -205,6 +94,7 @@ class ImpactorSimulation(eqx.Module):
     n_images: int = eqx.field(static=True)
     steps_per_image: int = eqx.field(static=True)
     coast_steps: int = eqx.field(static=True, default=4)
+    camera_misaligned: bool = eqx.field(static=True, default=False)
     measurement: AbstractMeasurement = eqx.field(
         default_factory=lambda: GaussianLOSMeasurement(jnp.asarray(10e-6))
     )
@@ -296,8 +186,8 @@ class _Carry(NamedTuple):
 
 # Random streams (gnc_jax._random): each kind of draw has its own stream, so adding a kind
 # never changes the others. A run draws only what it uses, at the rate it is used:
-# * once per run: delivery, knowledge (position, velocity), attitude bias, accelerometer bias
-#   (3 each);
+# * once per run: delivery, knowledge (position, velocity), attitude bias, accelerometer bias,
+#   camera misalignment (3 each);
 # * once per image i (stream _IMAGES, index i), IMAGE_DRAWS standard normals:
 #   [0:2] image-processing noise, [2:5] attitude control, [5:8] attitude knowledge;
 # * once per run (stream _BURNS), a table of what only burns use, BURN_DRAWS normals per row:
@@ -309,7 +199,7 @@ class _Carry(NamedTuple):
 # few per cent of the image intervals, yet every vmapped lane computes whatever any lane might
 # use: drawing the burns' normals with each image (18 normals instead of 8) cost more than
 # the whole table, and one row fetched per image costs less than fetching separate ones.
-_DELIVERY, _KNOW_POS, _KNOW_VEL, _ATT_BIAS, _ACC_BIAS, _IMAGES, _BURNS = range(7)
+_DELIVERY, _KNOW_POS, _KNOW_VEL, _ATT_BIAS, _ACC_BIAS, _IMAGES, _BURNS, _MISALIGNMENT = range(8)
 IMAGE_DRAWS = 8
 BURN_DRAWS = 14
 # A run with more burning intervals than the table's rows reuses them cyclically. A third or
@@ -394,10 +284,20 @@ def initial_conditions(sim: ImpactorSimulation, key: PRNGKeyArray):
     return truth, NavEstimate(x_hat, p0), draws
 
 
-def camera_attitudes(sim: ImpactorSimulation, r_hat: Vector3, attitude_bias_rad, w) -> tuple:
+def camera_misalignment(sim: ImpactorSimulation, key: PRNGKeyArray) -> Vector3:
+    """The run's camera misalignment (rad, a rotation vector): fixed for the run, its own
+    random stream, so the other draws do not change with it."""
+    return sim.errors.camera_misalignment_rad * stream_normal(key, _MISALIGNMENT)
+
+
+def camera_attitudes(
+    sim: ImpactorSimulation, r_hat: Vector3, attitude_bias_rad, w, misalignment_rad=None
+) -> tuple:
     """``(c_true, c_est)``, each the three rows of a camera attitude C_cI: the camera pointed
-    at the estimated target direction with attitude-control error (``w[2:5]``), and the
-    attitude the navigation believes (bias + knowledge error ``w[5:8]``).
+    at the estimated target direction with attitude-control error (``w[2:5]``) and rotated by
+    its misalignment ``misalignment_rad`` (None: none), and the attitude the navigation
+    believes (bias + knowledge error ``w[5:8]``, of the attitude reference: the filter does
+    not know the misalignment).
 
     The attitude errors' rotations come from power series (``small_rotation_entries``: no
     trigonometry), composed row by row.
@@ -406,7 +306,10 @@ def camera_attitudes(sim: ImpactorSimulation, r_hat: Vector3, attitude_bias_rad,
     cmd = camera_axes(-r_hat, sim.context.c_bi[2])
     c_true = rotate_rows(small_rotation_entries(err.attitude_control_rad * w[2:5]), cmd)
     knowledge = attitude_bias_rad + err.attitude_noise_rad * w[5:8]
-    return c_true, rotate_rows(small_rotation_entries(knowledge), c_true)
+    c_est = rotate_rows(small_rotation_entries(knowledge), c_true)
+    if misalignment_rad is not None:
+        c_true = rotate_rows(small_rotation_entries(misalignment_rad), c_true)
+    return c_true, c_est
 
 
 def image_update(
@@ -567,7 +470,9 @@ def _control_step(sim: ImpactorSimulation, law, accel_bias, record, carry: _Carr
     return new, rec
 
 
-def _image_step(sim: ImpactorSimulation, law, key, draws, burns, record, carry: _Carry, i):
+def _image_step(
+    sim: ImpactorSimulation, law, key, draws, burns, misalignment, record, carry: _Carry, i
+):
     """One image interval: image -> EKF update -> guidance ``plan`` -> control steps ->
     accelerometer noise -> covariance propagation."""
     ctx, err = sim.context, sim.errors
@@ -584,7 +489,7 @@ def _image_step(sim: ImpactorSimulation, law, key, draws, burns, record, carry: 
     # nothing (the Gaussian one).
     def draws_and_attitudes(r_hat):
         w = image_draws(key, i)
-        return w, camera_attitudes(sim, r_hat, bias, w)
+        return w, camera_attitudes(sim, r_hat, bias, w, misalignment)
 
     w, attitudes = computed_once(draws_and_attitudes, t, carry.r_hat)
     gain, meas = computed_once(
@@ -751,7 +656,8 @@ def simulate(
         images_used=jnp.zeros((), jnp.int32),
         innovations_outside=jnp.zeros((), jnp.int32),
     )
-    image_step = functools.partial(_image_step, sim, law, key, draws, burns, record)
+    misalignment = camera_misalignment(sim, key) if sim.camera_misaligned else None
+    image_step = functools.partial(_image_step, sim, law, key, draws, burns, misalignment, record)
     carry, rec = jax.lax.scan(image_step, carry0, jnp.arange(sim.n_images))
     outcome = _outcome(sim, carry, draws)
     # A run whose navigation was lost ends nav_lost, ahead of what it then does to its fuel.
@@ -760,68 +666,61 @@ def simulate(
     return with_status(outcome, failures), flatten_trace(rec)
 
 
-def build(scenario) -> ImpactorSimulation:
-    """Simulation data of a validated impactor :class:`Scenario` (SI units); the guidance law
-    is built by the system from ``[guidance.<law>]`` (``systems.impactor``)."""
-
-    cfg = scenario.config
-    a, sc, dy, cam, nv, er, g = (
-        cfg[k]
-        for k in (
-            "approach",
-            "spacecraft",
-            "dynamics",
-            "camera",
-            "navigation",
-            "errors",
-            "guidance",
-        )
+def measurement_setup(p: ImpactorParams) -> MeasurementSetup:
+    """What the measurement front end is built from (SI), from the scenario's parameters."""
+    return MeasurementSetup(
+        camera=p.camera.model(),
+        target=p.target.model(p.dynamics.sun_unit),
+        image_processing_rad=p.errors.image_processing_rad,
+        phase_correction=p.navigation.phase_correction,
     )
+
+
+def build(scenario) -> ImpactorSimulation:
+    """Simulation data of a validated impactor :class:`Scenario` (SI units, from the declared
+    parameters :class:`~gnc_jax.systems.impactor.params.ImpactorParams`); the guidance law is
+    built by the system from ``[guidance.<law>]`` (``systems.impactor``)."""
+    p = ImpactorParams.of(scenario.config)
+    a, sc, dy, g = p.approach, p.spacecraft, p.dynamics, p.guidance
     f = lambda x: jnp.asarray(x, dtype=jnp.float64)  # noqa: E731
-    r0 = f(a["position_km"]) * 1e3
-    v0 = f(a["velocity_kmps"]) * 1e3
-    check_b_plane_frame(v0, a["reference_normal"])
-    c_bi = b_plane_frame(v0, f(a["reference_normal"]))
-    # Mission times derived from the time of flight are rounded to 1 us so that a scheduled
-    # event at "t_go = 750 s" coincides with a burn scheduled at 6450 s despite rounding.
-    tof = round(time_of_flight_s(cfg), 6)
-    d = dy["sun_distance_au"] * AU_M
+    check_b_plane_frame(a.velocity_mps, a.reference_normal)
+    c_bi = b_plane_frame(a.velocity_mps, a.reference_normal)
+    times = timeline(p)
+    d = dy.sun_distance_m
     tide = GM_SUN_M3S2 / d**3 if d > 0 else 0.0
-    sun = f(dy["sun_direction"])
-    dynamics = RelativeDynamics.of(dy["mu_target_m3s2"], tide, sun / jnp.linalg.norm(sun))
-    engine = Engine(f(sc["thrust_n"]), f(sc["isp_s"]))
-    t_cut = round(tof - g["cutoff_tgo_s"], 6)
-    image_dt = cam["image_interval_s"]
+    sun = dy.sun_unit
+    dynamics = RelativeDynamics.of(dy.mu_target_m3s2, tide, sun)
+    engine = Engine(sc.thrust_n, sc.isp_s)
     context = ImpactorGuidanceContext(
         c_bi=c_bi,
-        aim_initial_m=f(g["aim_initial_km"]) * 1e3,
-        aim_final_m=f(g["aim_final_km"]) * 1e3,
-        retarget_time_s=f(round(tof - g["retarget_tgo_s"], 6)),
-        cutoff_time_s=f(t_cut),
+        aim_initial_m=g.aim_initial_m,
+        aim_final_m=g.aim_final_m,
+        retarget_time_s=f(times.retarget_time_s),
+        cutoff_time_s=f(times.cutoff_time_s),
         engine=engine,
-        mass_kg=f(sc["mass_kg"]),
+        mass_kg=sc.mass_kg,
         dynamics=dynamics,
-        dt_s=float(g["dt_s"]),
-        image_interval_s=float(image_dt),
+        dt_s=g.dt_s,
+        image_interval_s=p.camera.image_interval_s,
     )
-    errors = from_scenario(ImpactorErrors, cfg)
-    sim = ImpactorSimulation(
-        r0_m=r0,
-        v0_mps=v0,
+    setup = measurement_setup(p)
+    return ImpactorSimulation(
+        r0_m=a.position_m,
+        v0_mps=a.velocity_mps,
         context=context,
         dynamics=dynamics,
         engine=engine,
-        mass_kg=f(sc["mass_kg"]),
-        propellant_kg=f(sc["propellant_kg"]),
-        errors=errors,
-        focal_length_m=f(cam["focal_length_m"]),
-        process_noise_m2s3=f(nv["process_noise_m2s3"]),
-        consider_attitude_bias=f(1.0 if nv["consider_attitude_bias"] else 0.0),
-        n_images=int(math.ceil(t_cut / image_dt - 1e-9)),
-        steps_per_image=int(round(image_dt / g["dt_s"])),
-        coast_steps=int(dy["coast_steps"]),
-        measurement=measurement_class(nv["measurement"]).from_config(cfg),
-        camera=camera_model(cam),
-        target=target_model(cfg["target"], sun / jnp.linalg.norm(sun)),
+        mass_kg=sc.mass_kg,
+        propellant_kg=sc.propellant_kg,
+        errors=p.errors,
+        focal_length_m=p.camera.focal_length_m,
+        process_noise_m2s3=p.navigation.process_noise_m2s3,
+        consider_attitude_bias=p.navigation.consider_attitude_bias,
+        n_images=times.n_images,
+        steps_per_image=times.steps_per_image,
+        coast_steps=dy.coast_steps,
+        camera_misaligned=float(p.errors.camera_misalignment_rad) != 0.0,
+        measurement=measurement_class(p.navigation.measurement).from_setup(setup),
+        camera=setup.camera,
+        target=setup.target,
     )
-    return sim

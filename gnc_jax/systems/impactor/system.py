@@ -2,12 +2,12 @@
 
 Truth, camera, EKF, guidance and engine are in :mod:`gnc_jax.systems.impactor.simulation`; the
 laws in the family :mod:`gnc_jax.guidance.impactor` (``los``, ``predictive``, ``pn`` and any law
-registered into it); the scenario sections in :mod:`gnc_jax.systems.impactor.schema`. This file
-ties them together, with the summary statistics and the report figures.
+registered into it); the scenario fields in :mod:`gnc_jax.systems.impactor.params` and their
+cross-field checks in :mod:`gnc_jax.systems.impactor.schema`. This file ties them together,
+with the summary statistics and the report figures.
 """
 
 import dataclasses
-import math
 import pathlib
 from typing import Any, ClassVar
 
@@ -27,6 +27,7 @@ from ..base import AbstractSystem, TraceRequest, register_system
 from ..impact import IMPACT_LABELS, hit_statistics, impact_objective, impact_statistics
 from . import schema as impactor_scenario
 from . import simulation as impactor_sim
+from .params import PARAMETER_MODULES, ImpactorParams, timeline
 
 
 def _impactor_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
@@ -48,7 +49,8 @@ def _impactor_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, 
 
 def _b_plane_points(plt, summary, runs, ok, scenario):
     """Impact points in the B-plane with their 1σ and 3σ ellipses (seed 000 eq. 17)."""
-    aim = np.array(scenario.config["guidance"]["aim_final_km"]) * 1e3
+    sim = impactor_sim.build(scenario)
+    aim = np.asarray(sim.context.aim_final_m)
     b = np.stack([runs["b_t_m"][ok], runs["b_r_m"][ok]], axis=1)
 
     fig, ax = plt.subplots(figsize=(6.4, 6.0))
@@ -61,7 +63,6 @@ def _b_plane_points(plt, summary, runs, ok, scenario):
             xy = ellipse_xy(mean, cov, k)
             p = float(ellipse_probability(k))
             ax.plot(xy[0], xy[1], "k" + style, lw=1, label=f"{k}σ ellipse (P = {p:.3f})")
-    sim = impactor_sim.build(scenario)
     shadow = np.asarray(impactor_sim.capture_silhouette(sim))
     xy = ellipse_xy(-aim, shadow, 1)
     ax.plot(xy[0], xy[1], "C2-", lw=1.5, label="target silhouette (hit inside)")
@@ -201,8 +202,7 @@ def _centroid_frames_figure(scenario, trace, out: pathlib.Path) -> pathlib.Path:
 class ImpactorSystem(AbstractSystem):
     name = "impactor"
     description = "small-body impactor terminal guidance: optical navigation, EKF, engine"
-    sections = impactor_scenario.SCHEMA
-    parameter_modules = (impactor_sim.ImpactorErrors,)
+    parameter_modules = PARAMETER_MODULES
     law_family = AbstractImpactorGuidance
     default_law = "los"
     metrics = (
@@ -248,16 +248,14 @@ class ImpactorSystem(AbstractSystem):
     RENDER_STEPS: ClassVar[float] = 230.0  # per image, at the default camera (32 rays, ROI 32)
 
     def steps_per_run(self, config):
-        g, cam = config["guidance"], config["camera"]
-        interval = cam["image_interval_s"]
-        tof = impactor_scenario.time_of_flight_s(config)
-        n_images = max(math.ceil((tof - g["cutoff_tgo_s"]) / interval - 1e-9), 1)  # as built
-        per_image = interval / g["dt_s"] + self.IMAGE_STEPS
-        if config["navigation"]["measurement"] == "image":
-            rays = (cam["samples"] / 32) ** 2
-            labelling = (cam["roi_px"] / 32) ** 2 * cam["label_iterations"] / 24
+        p = ImpactorParams.of(config)
+        times, cam = timeline(p), p.camera
+        per_image = times.steps_per_image + self.IMAGE_STEPS
+        if p.navigation.measurement == "image":
+            rays = (cam.samples / 32) ** 2
+            labelling = (cam.roi_px / 32) ** 2 * cam.label_iterations / 24
             per_image += self.RENDER_STEPS * 0.5 * (rays + labelling)
-        return n_images * per_image + config["dynamics"]["coast_steps"]
+        return times.n_images * per_image + p.dynamics.coast_steps
 
     def schema(self):
         """The sections, with ``navigation.measurement`` choosing among the registered front
