@@ -11,7 +11,7 @@ from .impactor.los import LOSGuidanceState, LOSSwitchingCurveGuidance, switching
 from .impactor.pn import ProportionalNavigationGuidance as ProportionalNavigationGuidance
 from .impactor.predictive import PredictiveGuidance, PredictiveGuidanceState
 from .intercept.apn import APNState, AugmentedPNGuidance, PNGuidanceContext, PNNavigation
-from .midcourse.targeting import (
+from .midcourse import (
     AutonomousCorrection,
     NewtonTargeter,
     TargetingResult,

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import gnc_jax as gj
-from gnc_jax.guidance.midcourse.targeting import (
+from gnc_jax.guidance.midcourse import (
     SENSITIVITIES,
     SENSITIVITY_METHODS,
     AbstractMidcourseGuidance,

@@ -13,7 +13,7 @@ import pytest
 
 import gnc_jax as gj
 from gnc_jax import cli, montecarlo
-from gnc_jax.guidance.midcourse.targeting import AbstractMidcourseGuidance, AutonomousCorrection
+from gnc_jax.guidance.midcourse import AbstractMidcourseGuidance, AutonomousCorrection
 from gnc_jax.scenario import ScenarioError
 from gnc_jax.systems.midcourse import simulation as midcourse
 

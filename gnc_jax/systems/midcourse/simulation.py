@@ -50,7 +50,7 @@ from ...dynamics.heliocentric import (
 from ...geometry.bplane import BPlaneError, check_b_plane_frame
 from ...geometry.kepler import propagate_kepler
 from ...geometry.lambert import solve_lambert
-from ...guidance.midcourse.targeting import (
+from ...guidance.midcourse import (
     SENSITIVITY_METHODS,
     AbstractMidcourseGuidance,
     AbstractSensitivity,

@@ -3,7 +3,7 @@
 
 Truth propagation, navigation and execution errors are in
 :mod:`gnc_jax.systems.midcourse.simulation`; the correction rule and its Newton targeter in
-:mod:`gnc_jax.guidance.midcourse.targeting`; the scenario parameters in
+:mod:`gnc_jax.guidance.midcourse`; the scenario parameters in
 :mod:`gnc_jax.systems.midcourse.params`, their cross-field checks in
 :mod:`gnc_jax.systems.midcourse.schema`.
 """
@@ -16,7 +16,7 @@ import numpy as np
 
 from ..._status import Status
 from ...constants import SECONDS_PER_DAY
-from ...guidance.midcourse.targeting import AbstractMidcourseGuidance
+from ...guidance.midcourse import AbstractMidcourseGuidance
 from ...plotting import pyplot, saver
 from ..base import AbstractSystem, register_system
 from . import params as midcourse_params
