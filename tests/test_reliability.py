@@ -4,8 +4,8 @@ Each case found by trying the package as a new user would (hostile or unusual in
 ``run``, ``reproduce`` and ``report``) is a regression test here: the refusal names the field,
 the value and what is allowed, and comes before the reference design or any compilation; a
 run that leaves its model's domain is a failure status, never ``ok``. The capsule's cases are
-in ``test_reliability_capsule.py``, midcourse and intercept in
-``test_reliability_midcourse_intercept.py``, random scenarios in ``test_fuzz.py``.
+in ``systems/capsule/test_reliability.py``, midcourse and intercept in
+``systems/test_reliability_midcourse_intercept.py``, random scenarios in ``test_fuzz.py``.
 """
 
 import json

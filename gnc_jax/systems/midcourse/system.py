@@ -273,7 +273,7 @@ class MidcourseSystem(AbstractSystem):
     }
     example = "phoenix-midcourse"
     # adaptive step control and Newton iterations amplify the batched program's rounding to
-    # millimetres on a miss of tens of metres (tests/simulation/test_midcourse_sim.py)
+    # millimetres on a miss of tens of metres (tests/systems/midcourse/test_simulation.py)
     batch_tolerance = (1e-9, 0.05)
     test_overrides: ClassVar[dict[str, Any]] = {}
 
