@@ -330,12 +330,12 @@ def cruise_ensemble(n: int, seed: int = 0) -> CruiseEnsemble:
     """``n`` dispersed states at the ``phoenix-midcourse`` first fix, propagated to E-10 d."""
     from gnc_jax.geometry.kepler import propagate_kepler
     from gnc_jax.geometry.lambert import solve_lambert
-    from gnc_jax.systems.midcourse import simulation as midcourse
+    from gnc_jax.systems.midcourse.build import simulation_data
     from gnc_jax.systems.midcourse.params import parameters
 
     scenario = gj.load_scenario("phoenix-midcourse")
     p = parameters(scenario.config)
-    sim = midcourse._simulation(p)  # model and epochs, no nominal design
+    sim = simulation_data(p)  # model and epochs, no nominal design
     launch = p.mission.launch_epoch_s
     t_fix, t_enc = float(sim.t_first_fix_s), float(sim.t_encounter_s)
     r_earth, _ = ephemeris.planet_state(ephemeris.planet_index("earth"), launch)

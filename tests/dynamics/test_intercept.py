@@ -20,8 +20,8 @@ from gnc_jax.dynamics.intercept import (
     drift_kick_drift_step,
     propagate,
 )
+from gnc_jax.systems.intercept.build import initial_state
 from gnc_jax.systems.intercept.params import parameters
-from gnc_jax.systems.intercept.simulation import initial_state
 
 ARC_S = 91_200.0  # the guided 25.3 h of Table 2 (25.5 h minus the 10 min coast)
 MU_T = 4.892
@@ -152,7 +152,7 @@ def test_coast_to_b_plane_matches_the_reference_closest_approach(table2):
     """Unguided: the B-plane crossing equals the DOP853 pair's closest approach (planar)."""
     dyn = InterceptDynamics(jnp.asarray(MU_SUN), jnp.asarray(MU_T), jnp.asarray(245.0))
     sc = gj.load_scenario("bennu-apn-ideal")
-    from gnc_jax.systems.intercept.simulation import build  # the simulation data only (no law)
+    from gnc_jax.systems.intercept.build import build  # the simulation data only (no law)
 
     sim = build(sc)
     b, t_b = jax.jit(lambda y: coast_to_b_plane(dyn, y, sim.c_bi, 400))(table2)

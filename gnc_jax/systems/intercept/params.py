@@ -128,7 +128,7 @@ class Spacecraft(eqx.Module):
 
 class Guidance(eqx.Module):
     """``[guidance]`` (the system's; the law's gains are in ``[guidance.<law>]``). Static: the
-    times size the loops (:func:`gnc_jax.systems.intercept.simulation.loop_sizes`)."""
+    times size the loops (:func:`gnc_jax.systems.intercept.build.loop_sizes`)."""
 
     coast_s: float = _guidance(
         600.0,

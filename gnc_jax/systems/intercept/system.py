@@ -1,10 +1,11 @@
 """The intercept system's contract: deep-space intercept with variable-coefficient augmented PN
 and pulse firing (seed 004).
 
-Truth, camera, EKF, law and pulses are in :mod:`gnc_jax.systems.intercept.simulation`; the laws
-in the family :mod:`gnc_jax.guidance.intercept` (``apn``); the scenario parameters in
-:mod:`gnc_jax.systems.intercept.params`, their cross-field checks in
-:mod:`gnc_jax.systems.intercept.schema`.
+One run's loop is :mod:`gnc_jax.systems.intercept.simulation` (its truth and pulse step,
+navigation, random draws and data in the modules beside it, its data built by
+:mod:`gnc_jax.systems.intercept.build`); the laws in the family :mod:`gnc_jax.guidance.intercept`
+(``apn``); the scenario parameters in :mod:`gnc_jax.systems.intercept.params`, their cross-field
+checks in :mod:`gnc_jax.systems.intercept.schema`.
 """
 
 import pathlib
@@ -18,6 +19,7 @@ from ...guidance.intercept.base import AbstractInterceptGuidance
 from ...plotting import ellipse_xy, pyplot, saver
 from ..base import AbstractSystem, TraceRequest, register_system
 from ..impact import IMPACT_LABELS, hit_statistics, impact_objective, impact_statistics
+from . import build as intercept_build
 from . import params as intercept_params
 from . import schema as intercept_scenario
 from . import simulation as intercept_sim
@@ -191,12 +193,12 @@ def intercept_steps(config: dict) -> float:
     """Cost of one intercept run (:meth:`InterceptSystem.steps_per_run`) in guidance steps of
     the EKF loop: the guidance steps (a step with perfect navigation costs 0.4 of one), the LOS
     images (an EKF update costs 1.4 steps) and the final coast's RK4 steps, from the loop
-    lengths :func:`gnc_jax.systems.intercept.simulation.build` is built with
-    (:func:`~gnc_jax.systems.intercept.simulation.loop_sizes`); a float, so that a scenario
+    lengths :func:`gnc_jax.systems.intercept.build.build` is built with
+    (:func:`~gnc_jax.systems.intercept.build.loop_sizes`); a float, so that a scenario
     whose loops would not fit in an integer still gets a (refusable) estimate."""
     p = intercept_params.parameters(config)
-    y0, _ = intercept_sim.initial_state(p)
-    sizes = intercept_sim.loop_sizes(p, y0)
+    y0, _ = intercept_build.initial_state(p)
+    sizes = intercept_build.loop_sizes(p, y0)
     images, per_image = sizes.n_images, sizes.steps_per_image
     if p.navigation.model == "perfect":
         return float(0.4 * images * per_image + p.guidance.coast_steps)
@@ -229,7 +231,7 @@ class InterceptSystem(AbstractSystem):
         intercept_scenario.check(config)
 
     def build(self, scenario):
-        sim = intercept_sim.build(scenario)
+        sim = intercept_build.build(scenario)
         return sim, self.build_law(scenario.config, sim.context)
 
     def simulate(self, params, law, key, record=False):

@@ -2,9 +2,11 @@
 (seed 001).
 
 Truth propagation, navigation and execution errors are in
-:mod:`gnc_jax.systems.midcourse.simulation`; the correction rule and its Newton targeter in
-:mod:`gnc_jax.guidance.midcourse`; the scenario parameters in
-:mod:`gnc_jax.systems.midcourse.params`, their cross-field checks in
+:mod:`gnc_jax.systems.midcourse.simulation`, the nominal transfer and the simulation data in
+:mod:`~gnc_jax.systems.midcourse.nominal` and :mod:`~gnc_jax.systems.midcourse.build`, the
+sensitivity figures' partials in :mod:`~gnc_jax.systems.midcourse.partials`; the correction
+rule and its Newton targeter in :mod:`gnc_jax.guidance.midcourse`; the scenario
+parameters in :mod:`gnc_jax.systems.midcourse.params`, their cross-field checks in
 :mod:`gnc_jax.systems.midcourse.schema`.
 """
 
@@ -19,7 +21,9 @@ from ...constants import SECONDS_PER_DAY
 from ...guidance.midcourse import AbstractMidcourseGuidance
 from ...plotting import pyplot, saver
 from ..base import AbstractSystem, register_system
+from . import build as midcourse_build
 from . import params as midcourse_params
+from . import partials as midcourse_partials
 from . import schema as midcourse_scenario
 from . import simulation as midcourse_sim
 
@@ -90,7 +94,7 @@ def _partials_vs_epsilon(plt, sim):
     """Seed 001 Fig. 1: partials against the central-difference step, autodiff as reference."""
     rows, wrt = ROWS, WRT
     eps = np.logspace(-6, 2, 33)
-    k_cd, k_ad = (np.asarray(k) for k in midcourse_sim.partials_vs_step(sim, jnp.asarray(eps)))
+    k_cd, k_ad = (np.asarray(k) for k in midcourse_partials.partials_vs_step(sim, jnp.asarray(eps)))
     scale = np.abs(k_ad).max(axis=1)
     fig, axes = plt.subplots(2, 3, figsize=(14, 7), sharex=True)
     for i in range(3):
@@ -117,7 +121,7 @@ def _partials_vs_time(plt, sim, eps_g):
     t_enc, t_fix = float(sim.t_encounter_s), float(sim.t_first_fix_s)
     span_days = (t_enc - t_fix) / SECONDS_PER_DAY
     days = np.concatenate([np.linspace(span_days, 10.0, 20), np.geomspace(8.0, 1.1, 8)])
-    sweep = midcourse_sim.partials_vs_time(
+    sweep = midcourse_partials.partials_vs_time(
         sim, jnp.asarray(t_enc - days * SECONDS_PER_DAY), eps_g, t_enc - SECONDS_PER_DAY
     )
     ks = {method: np.asarray(k) for method, k in sweep.items()}
@@ -273,7 +277,7 @@ class MidcourseSystem(AbstractSystem):
     }
     example = "phoenix-midcourse"
     # adaptive step control and Newton iterations amplify the batched program's rounding to
-    # millimetres on a miss of tens of metres (tests/systems/midcourse/test_simulation.py)
+    # millimetres on a miss of tens of metres (tests/simulation/test_midcourse_sim.py)
     batch_tolerance = (1e-9, 0.05)
     test_overrides: ClassVar[dict[str, Any]] = {}
 
@@ -286,7 +290,7 @@ class MidcourseSystem(AbstractSystem):
         midcourse_scenario.check(config)
 
     def build(self, scenario):
-        sim = midcourse_sim.build(scenario)
+        sim = midcourse_build.build(scenario)
         return sim, self.build_law(scenario.config, sim.guidance_context)
 
     def simulate(self, params, law, key, record=False):

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import gnc_jax as gj
+from gnc_jax.systems.intercept.build import initial_state
 from gnc_jax.systems.intercept.params import parameters
-from gnc_jax.systems.intercept.simulation import initial_state
 from gnc_jax.systems.intercept.system import estimate_pulse_trains
 
 # A 2000 s approach (20 400 km, 10 km off) with proportionally smaller errors: same code paths.
@@ -121,7 +121,8 @@ def test_packed_filter_and_draw_blocks_keep_the_per_run_statistics(image_interva
     not a multiple of DRAW_BLOCK), and a 3 s image interval (three guidance steps per image,
     the spare pointing draws): every run ok, the filter converges across the LOS and the
     miss is removed; run i is the same in a batch of 2 and of 5 (per-run keys and blocks)."""
-    from gnc_jax.systems.intercept.simulation import DRAW_BLOCK, simulate
+    from gnc_jax.systems.intercept.draws import DRAW_BLOCK
+    from gnc_jax.systems.intercept.simulation import simulate
 
     over = SHORT + [f"navigation.image_interval_s={image_interval_s}"]
     scenario = gj.load_scenario("bennu-apn", overrides=over)
