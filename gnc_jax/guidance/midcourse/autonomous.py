@@ -14,7 +14,7 @@ from ...schema import ScenarioError
 from ..base import register_law
 from .base import AbstractMidcourseGuidance, MidcourseCommand, MidcourseGuidanceContext
 from .sensitivity import SENSITIVITIES, SENSITIVITY_METHODS
-from .targeter import NewtonTargeter
+from .targeter import NewtonTargeter, TargetingResult
 
 
 class AutonomousCorrectionState(NamedTuple):
@@ -109,6 +109,18 @@ class AutonomousCorrection(AbstractMidcourseGuidance):
             tolerance=tolerance[: self.n_targets],
             sensitivity=method.from_config({"epsilon_mps": self.epsilon_mps}),
             iterations=self.iterations,
+        )
+
+    def solve(self, problem, aim) -> TargetingResult:
+        """The targeter's Newton solution of ``problem`` toward ``aim``, from zero Δv."""
+        return self.targeter.solve(problem, aim, jnp.zeros(3))
+
+    @classmethod
+    def propagations_per_fix(cls, section: dict) -> float:
+        """Newton iterations times the sensitivity method's propagations, plus the last
+        prediction."""
+        return (
+            section["iterations"] * SENSITIVITY_METHODS[section["sensitivity"]].propagations + 1.0
         )
 
     @classmethod

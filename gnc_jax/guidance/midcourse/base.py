@@ -102,3 +102,9 @@ class AbstractMidcourseGuidance(AbstractGuidanceLaw):
     navigation fix and returns a `MidcourseCommand`."""
 
     laws: ClassVar[dict[str, type]] = {}
+
+    @classmethod
+    def propagations_per_fix(cls, section: dict) -> float:
+        """Propagations to the encounter one call of the law costs, from its validated
+        ``[guidance.<law>]`` section (the system's cost model); default one."""
+        return 1.0

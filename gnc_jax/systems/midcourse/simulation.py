@@ -173,7 +173,7 @@ def execute_burn(dv: Vector3, errors: MidcourseErrors, noise: Float[Array, "3"])
 
 def _solve_correction(sim, law, t_s, state) -> TargetingResult:
     """The law's Newton solution at ``state`` (``benchmarks/midcourse.py`` times it)."""
-    return law.targeter.solve(sim.guidance_context.problem(t_s, state), sim.aim, jnp.zeros(3))
+    return law.solve(sim.guidance_context.problem(t_s, state), sim.aim)
 
 
 def initial_state(sim: MidcourseSimulation, key: PRNGKeyArray):

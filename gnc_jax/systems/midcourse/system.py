@@ -214,16 +214,14 @@ def midcourse_figures(summary, runs, scenario, out: pathlib.Path) -> list[pathli
 # the encounter of the packaged phoenix-midcourse transfer (238 days, rtol 1e-13) takes
 # _ARC_STEPS adaptive steps (diffrax's ``num_steps``), each costing _STEP_COST (dopri8: its 12
 # stages; dopri5 and tsit5: measured, their steps are cheaper than their 6 stages suggest), and
-# the steps grow as rtol**-0.13 when rtol tightens. A Newton iteration costs _ITERATION_ARCS
-# propagations (autodiff: one primal carrying three tangents; central differences: Q and six
-# more; STM: the 6 + 18 variational states). All measured by
+# the steps grow as rtol**-0.13 when rtol tightens. A Newton iteration costs the sensitivity
+# method's ``propagations`` (declared with each method). All measured by
 # benchmarks/cost_midcourse_intercept.py, which also measures STEP_SECONDS (wall seconds per
 # evaluation per device, 2 devices on the 2-core development machine; the model is within
 # 0.8-1.9x of the measured time over solvers, tolerances, sensitivities and fix counts).
 _ARC_STEPS = {"dopri8": 149.0, "dopri5": 538.0, "tsit5": 542.0}
 _STEP_COST = {"dopri8": 12.0, "dopri5": 2.44, "tsit5": 2.42}
 _RTOL_GROWTH = 0.13
-_ITERATION_ARCS = {"autodiff": 4.0, "central_difference": 7.0, "stm": 5.0}
 STEP_SECONDS = 6.9e-7
 
 
@@ -235,11 +233,11 @@ def midcourse_steps(config: dict) -> float:
     rtol and at most ``max_steps`` steps."""
     p = midcourse_params.parameters(config)
     dy, nv, day = p.dynamics, p.navigation, SECONDS_PER_DAY
-    law = config["guidance"][config["guidance"]["law"]]
+    law = AbstractMidcourseGuidance.laws[config["guidance"]["law"]]
     span = max(p.mission.encounter_epoch_s - p.mission.first_fix_epoch_s, day)
     steps = _ARC_STEPS[dy.solver] * (float(dy.rtol) / 1e-13) ** -_RTOL_GROWTH
     arc = min(steps, dy.max_steps) * _STEP_COST[dy.solver]  # from the first fix
-    solve = law["iterations"] * _ITERATION_ARCS[law["sensitivity"]] + 1.0
+    solve = law.propagations_per_fix(config["guidance"][law.law_name])
     arcs = 2.0
     if bool(p.guidance.enabled):
         interval = float(nv.fix_interval_s)

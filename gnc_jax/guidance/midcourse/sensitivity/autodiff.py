@@ -11,5 +11,7 @@ from .base import AbstractSensitivity, register_sensitivity
 class AutodiffSensitivity(AbstractSensitivity):
     """K by forward-mode autodiff through the propagation (`jacobian_autodiff`)."""
 
+    propagations = 4.0  # one primal carrying three tangents
+
     def q_and_jacobian(self, problem, p):
         return jacobian_autodiff(problem.q, p)

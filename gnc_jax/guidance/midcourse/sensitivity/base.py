@@ -18,6 +18,9 @@ class AbstractSensitivity(eqx.Module):
     `register_sensitivity`."""
 
     method_name: ClassVar[str] = ""
+    propagations: ClassVar[float] = 1.0
+    """Propagations to the encounter one Newton iteration costs with this method, for the
+    cost model (measured by ``benchmarks/cost_midcourse_intercept.py``)."""
 
     @abc.abstractmethod
     def q_and_jacobian(self, problem: AbstractTargetingProblem, p: Float[Array, " m"]):

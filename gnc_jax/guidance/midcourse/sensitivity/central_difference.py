@@ -23,6 +23,7 @@ class CentralDifferenceSensitivity(AbstractSensitivity):
         epsilon: the step ε, in P's units (m/s).
     """
 
+    propagations = 7.0  # Q and six more
     epsilon: Scalar = eqx.field(default_factory=lambda: jnp.asarray(1e-3))
 
     def q_and_jacobian(self, problem, p):

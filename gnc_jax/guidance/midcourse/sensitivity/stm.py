@@ -11,5 +11,7 @@ class STMSensitivity(AbstractSensitivity):
     """K from the variational equations (seed 001 eqs. 21-26): the problem's
     ``q_and_stm_jacobian``."""
 
+    propagations = 5.0  # the 6 + 18 variational states
+
     def q_and_jacobian(self, problem, p):
         return problem.q_and_stm_jacobian(p)
