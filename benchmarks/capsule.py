@@ -134,27 +134,13 @@ def truth_only(sim, n, n_control, repeats):
 
     def one(y0, vehicle, atmosphere):
         truth = EntryArgs(vehicle, sim.earth, atmosphere, jnp.zeros(()))
-        z = jnp.zeros(())
-        y = to_xyz(y0)
-        f = capsule_sim._Flight(
-            y=y,
-            density=atmosphere.density(jnp.linalg.norm(y0.r) - sim.earth.equatorial_radius_m),
-            t=z,
-            act=sim.actuator.init(sim.hold_bank_rad),
-            done=jnp.asarray(False),
-            cross_y=y,
-            cross_t=z,
-            cross_bank=z,
-            heat_load=z,
-            heat_peak=z,
-            load_peak=z,
-        )
+        f = capsule_sim.initial_flight(sim, y0, atmosphere)
 
         def control(f, _):
             sub = lambda f, _: (capsule_sim._truth_substep(sim, truth, 1.0, f), None)  # noqa: E731
             return jax.lax.scan(sub, f, None, length=sim.substeps)[0], None
 
-        return jax.lax.scan(control, f, None, length=n_control)[0].load_peak
+        return jax.lax.scan(control, f, None, length=n_control)[0][2].load_peak
 
     fn, _ = _compiled(jax.vmap(one), y0, vehicle, atmosphere)
     return _best(lambda: fn(y0, vehicle, atmosphere), repeats) / (n * n_control) * 1e9

@@ -11,7 +11,7 @@ i.e. the lateral component of a banked lift vector is averaged out by the bank r
 bank magnitude follows a profile of Earth-relative speed.
 """
 
-from typing import ClassVar, NamedTuple
+from typing import TYPE_CHECKING, ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
@@ -35,6 +35,9 @@ from ...dynamics.entry import (
 )
 from ...geometry.sphere import central_angle, to_earth_fixed, unit
 from ..base import AbstractGuidanceLaw
+
+if TYPE_CHECKING:  # the reference module builds on this one
+    from .reference import ReferenceTrajectory
 
 
 class EntryModel(eqx.Module):
@@ -170,9 +173,12 @@ class AbstractEntryGuidance(AbstractGuidanceLaw):
     ``sigma_0``, ``bank_offset``, ``drag_ratio``, ``lift_ratio`` and ``last_status`` (a
     :class:`~gnc_jax.root_finding.RootStatus` code) for the outcome and the trace.
 
-    A law that tracks a designed second-entry reference says so with
-    :meth:`reference_switch_load_g`; the capsule system then designs the reference for the
-    scenario and hands it to the law's ``from_config`` as ``ctx``.
+    What the capsule system needs from a law it asks through the family's class methods,
+    never by the law's field names: whether the law tracks a designed second-entry reference
+    (:meth:`reference_switch_load_g`; the system then designs it for the scenario), the law's
+    checks against the entry interface (:meth:`check_entry`) and the predictor's cost
+    (:meth:`prediction_steps`). It hands the law's ``from_config`` an :class:`EntryMission`
+    (SI units, the reference included) as ``ctx``.
     """
 
     laws: ClassVar[dict[str, type]] = {}
@@ -183,6 +189,35 @@ class AbstractEntryGuidance(AbstractGuidanceLaw):
         tracks, read from the law's scenario ``section``; ``None`` (the default): the law
         tracks no designed reference."""
         return None
+
+    @classmethod
+    def check_entry(cls, section: dict, entry_altitude_m: float) -> None:
+        """Cross-field checks of the law's validated ``section`` against the capsule's entry
+        interface altitude (m), which the capsule system's checks hand it; raise
+        :class:`~gnc_jax.schema.ScenarioError` with one line. Default: none."""
+
+    @classmethod
+    def prediction_steps(cls, section: dict, flight_s: float) -> float | None:
+        """RK4 steps the law's on-board predictions take in one corrector cycle of a flight
+        of about ``flight_s`` seconds, estimated from its validated ``section`` alone (the
+        predictor's share of the capsule system's ``steps_per_run``); ``None`` (the default):
+        the law predicts nothing."""
+        return None
+
+
+class EntryMission(NamedTuple):
+    """What the capsule system hands an entry law's ``from_config`` as its ``ctx``: the
+    mission data the law's fields depend on, in SI units.
+
+    Attributes:
+        chute_altitude_m: the chute deploys (guidance ends) below it, m.
+        reference: the second-entry reference designed for this vehicle, entry and target
+            (for a law whose :meth:`AbstractEntryGuidance.reference_switch_load_g` is not
+            ``None``), else ``None``.
+    """
+
+    chute_altitude_m: Scalar
+    reference: "ReferenceTrajectory | None" = None
 
 
 class FlightVariables(NamedTuple):

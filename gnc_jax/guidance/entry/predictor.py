@@ -396,3 +396,28 @@ def finished_prediction(law, c: _PredictorState, y, t, model, target_fixed) -> P
     v_rel = y_end.v - jnp.cross(earth.angular_velocity(), y_end.r)
     chi = r_e * crossrange_to_target(y_end.r, v_rel, target)
     return Prediction(miss, chi, kind, c.k)
+
+
+# Cost model of the predictions (steps_per_cycle): fractions of the paper scenario's flight
+HORIZON_FRACTION = 0.56  # mean time to the switch point from a corrector cycle over the flight
+COAST_FRACTION = 0.6  # of that horizon flown in the predictor's coast steps (load < 0.02 g)
+PREDICTIONS_PER_CYCLE = 2.7  # mean predictions per corrector cycle (131 over 49 cycles)
+
+
+def steps_per_cycle(section: dict, flight_s: float) -> float:
+    """RK4 steps the predictions of one corrector cycle take in a flight of about
+    ``flight_s`` seconds, from the law's validated scenario ``section``: about
+    ``PREDICTIONS_PER_CYCLE`` predictions (at most ``1 + n_bracket + n_iter``), each
+    integrating about ``HORIZON_FRACTION`` of the flight ahead (to the switch point),
+    ``COAST_FRACTION`` of it in steps of ``predictor_coast_dt_s`` and the rest in steps of
+    ``predictor_dt_s``, at most ``predictor_max_steps``. The fractions are those of the paper
+    scenario (256 runs: flight 1250 s, switch at 827 s, 2.7 predictions per cycle, 48 steps
+    per prediction)."""
+    horizon_s = HORIZON_FRACTION * flight_s
+    horizon = horizon_s * (
+        (1.0 - COAST_FRACTION) / section["predictor_dt_s"]
+        + COAST_FRACTION / section["predictor_coast_dt_s"]
+    )
+    horizon = min(horizon, section["predictor_max_steps"])
+    slots = 1 + section["n_bracket"] + section["n_iter"]
+    return min(PREDICTIONS_PER_CYCLE, slots) * horizon

@@ -56,19 +56,20 @@ from ...geometry.sphere import (
     range_rate_to_target,
     to_inertial,
 )
-from ...params import from_config, param
+from ...params import from_config, param, si_value
 from ...schema import ScenarioError
 from ..base import register_law
 from .base import (
     AbstractEntryGuidance,
     EntryGuidanceContext,
+    EntryMission,
     EntryModel,
     EntryNav,
     flight_variables,
 )
 from .corrector import corrector_cycle
 from .phases import bank_sign, hold_bank_rad, phase_events
-from .predictor import filter_ratios, profile
+from .predictor import filter_ratios, profile, steps_per_cycle
 from .reference import ReferenceTrajectory
 from .state import SkipEntryState, initial_log, updated_log
 from .tracking import switch_compensation, track
@@ -376,13 +377,21 @@ class SkipEntryGuidance(AbstractEntryGuidance):
                 f"{section['predictor_coast_load_g']:g} g; allowed: below "
                 f"guidance.skip_entry.kepler_load_g = {section['kepler_load_g']:g} g"
             )
-        altitude = config["entry"]["altitude_km"]
-        if section["skip_out_altitude_km"] <= altitude:
+
+    @classmethod
+    def check_entry(cls, section, entry_altitude_m):
+        skip_out_m = float(si_value(cls, "skip_out_altitude_m", section["skip_out_altitude_km"]))
+        if skip_out_m <= entry_altitude_m:
             # the flight would count as a skip-out from its first step
             raise ScenarioError(
                 f"guidance.skip_entry.skip_out_altitude_km: {section['skip_out_altitude_km']:g}"
-                f" km; allowed: above entry.altitude_km = {altitude:g} km"
+                f" km; allowed: above the entry interface ({entry_altitude_m:g} m)"
             )
+
+    @classmethod
+    def prediction_steps(cls, section, flight_s):
+        """:func:`~gnc_jax.guidance.entry.predictor.steps_per_cycle`."""
+        return steps_per_cycle(section, flight_s)
 
     @classmethod
     def reference_switch_load_g(cls, section) -> float:
@@ -391,14 +400,15 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         return section["kepler_load_g"]
 
     @classmethod
-    def from_config(cls, section, config, ctx=None):
-        """The law of a scenario. ``ctx`` is the second-entry reference
-        (:class:`~gnc_jax.guidance.entry.reference.ReferenceTrajectory`) the capsule system
-        designed for this scenario's vehicle, entry and target
-        (:func:`gnc_jax.systems.capsule.reference.scenario_reference`). The chute altitude is
-        the entry's (``entry.chute_altitude_km``)."""
-        chute = jnp.asarray(config["entry"]["chute_altitude_km"] * 1e3, dtype=jnp.float64)
-        return from_config(cls, section, reference=ctx, chute_altitude_m=chute)
+    def from_config(cls, section, config, ctx: EntryMission | None = None):
+        """The law of a scenario, from the capsule system's :class:`EntryMission` ``ctx``
+        (:func:`gnc_jax.systems.capsule.reference.law_mission`): the chute altitude (m),
+        where guidance ends, and the reference designed for the scenario."""
+        if ctx is None:
+            raise ValueError("the skip-entry law is built with the capsule's EntryMission")
+        return from_config(
+            cls, section, reference=ctx.reference, chute_altitude_m=ctx.chute_altitude_m
+        )
 
     # ---- the guidance-law protocol ----
     def init(self, nav: EntryNav, ctx: EntryGuidanceContext) -> SkipEntryState:

@@ -2,7 +2,8 @@
 
 ``params`` its scenario parameters (one Module per section, each field declared once;
 ``dispersions`` the ``[dispersions]`` section) and ``schema`` their cross-field checks,
-``simulation`` one closed-loop entry (dispersed truth, bank actuator, chute crossing),
+``simulation`` one closed-loop entry (dispersed truth, bank actuator, chute crossing) and
+``state`` its loop state by kind, outcome and trace,
 ``reference`` the second-entry reference designed for a scenario and handed to its law,
 ``system`` the registered contract with its cost model and statistics, ``envelope`` its
 envelope pre-check (entry corridor, footprints) and ``figures`` its report figures. Its

@@ -1,13 +1,15 @@
 """The second-entry reference of a capsule scenario: the nominal problem of its vehicle,
 entry and target, designed once (:func:`gnc_jax.guidance.entry.cache.reference_for`: the reach
 check, the design and the tabulation, behind a progress bar, then cached on disk) and handed to
-the guidance law by :meth:`CapsuleSystem.build <gnc_jax.systems.capsule.CapsuleSystem.build>`.
+the guidance law, with the chute altitude, in its
+:class:`~gnc_jax.guidance.entry.base.EntryMission` by
+:meth:`CapsuleSystem.build <gnc_jax.systems.capsule.CapsuleSystem.build>`.
 """
 
 import jax.numpy as jnp
 
 from ...dynamics.entry import entry_state_from_conditions
-from ...guidance.entry.base import AbstractEntryGuidance, EntryModel
+from ...guidance.entry.base import AbstractEntryGuidance, EntryMission, EntryModel
 from ...guidance.entry.cache import reference_for
 from ...guidance.entry.nominal import NominalProblem
 from ...guidance.entry.reference import ReferenceTrajectory
@@ -48,12 +50,13 @@ def scenario_reference(
     return reference
 
 
-def law_reference(
+def law_mission(
     law: type[AbstractEntryGuidance], config: dict, sim: CapsuleSimulation
-) -> ReferenceTrajectory | None:
+) -> EntryMission:
     """What the capsule system hands the law class ``law`` as the ``ctx`` of its
-    ``from_config``: the reference of :func:`scenario_reference` for a law that tracks one
-    (its :meth:`~gnc_jax.guidance.entry.base.AbstractEntryGuidance.reference_switch_load_g`
-    is not ``None``), else ``None``."""
+    ``from_config`` (SI units): the chute altitude of ``sim`` and, for a law that tracks a
+    reference (whose ``reference_switch_load_g`` is not ``None``), the reference of
+    :func:`scenario_reference`."""
     load = law.reference_switch_load_g(config["guidance"][law.law_name])
-    return None if load is None else scenario_reference(config, sim, load)
+    reference = None if load is None else scenario_reference(config, sim, load)
+    return EntryMission(chute_altitude_m=sim.chute_altitude_m, reference=reference)

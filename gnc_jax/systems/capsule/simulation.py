@@ -10,21 +10,22 @@ predictor uses. The chute-deploy crossing at 10 km is located inside the step by
 Hermite interpolation.
 
 The simulator holds only the truth (dynamics, actuator, loads and heating, chute crossing), the
-accelerometer measurement and the outcome; the guidance is a member of the
+accelerometer measurement and the outcome. :func:`simulate` is the shared
+:func:`~gnc_jax.systems.loop.closed_loop` of its ``start``, ``run`` and ``finish``, whose
+carry is a :class:`~gnc_jax.systems.loop.LoopState` of the typed parts of
+:mod:`gnc_jax.systems.capsule.state`. The guidance is a member of the
 :class:`~gnc_jax.guidance.entry.base.AbstractEntryGuidance` family, called with
 ``init(nav, ctx)`` and ``step(state, nav, t, ctx)`` (``nav`` an
 :class:`~gnc_jax.guidance.entry.base.EntryNav`, ``ctx`` the
 :class:`~gnc_jax.guidance.entry.base.EntryGuidanceContext` of :func:`guidance_context`).
 """
 
-from typing import NamedTuple
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
 from ..._status import Status
-from ..._types import Array, Float, PRNGKeyArray, Scalar, Vector3
+from ..._types import PRNGKeyArray, Scalar, Vector3
 from ...dynamics.atmosphere import Atmosphere
 from ...dynamics.entry import (
     G0,
@@ -57,9 +58,10 @@ from ...guidance.entry.base import (
 )
 from ...integrate import rk4_step
 from ...root_finding import RootStatus
-from ..loop import with_status
+from ..loop import LoopState, closed_loop, flatten_trace, with_status
 from .dispersions import CapsuleDispersions
 from .params import CapsuleParams, capsule_params, loop_counts
+from .state import CapsuleDraws, CapsuleOutcome, CapsuleTally, CapsuleTruth, Trace
 
 
 class CapsuleSimulation(eqx.Module):
@@ -84,76 +86,6 @@ class CapsuleSimulation(eqx.Module):
     @property
     def control_dt(self) -> float:
         return self.dt_s * self.substeps
-
-
-class CapsuleOutcome(NamedTuple):
-    status: Array
-    downrange_err_km: Scalar  # > 0 overshoot
-    crossrange_err_km: Scalar  # > 0 left of the entry -> target track
-    load_peak_g: Scalar
-    heat_rate_peak_kw_m2: Scalar
-    heat_load_mj_m2: Scalar
-    skip_apogee_km: Scalar
-    switch_speed_mps: Scalar
-    switch_altitude_km: Scalar
-    switch_hdot_mps: Scalar
-    switch_range_km: Scalar  # ground range flown from the entry point to the switch point
-    bank_offset_deg: Scalar  # switch-point compensation (eqs. 16-17)
-    predictions: Array  # predictions an early-exit corrector would have made (whole flight)
-    cycle_predictions_max: Array
-    pc_cycles: Array
-    corrector_failures: Array
-    reversals: Array
-    predictor_steps: Scalar  # RK4 steps of all predictions (4 right-hand sides each)
-    t_guidance_s: Scalar
-    t_kepler_s: Scalar
-    t_switch_s: Scalar
-    t_chute_s: Scalar
-    dispersion: Float[Array, "10"]  # the draws, in the order of CapsuleDispersions
-
-
-class Trace(NamedTuple):
-    t_s: Scalar
-    altitude_m: Scalar
-    speed_mps: Scalar
-    range_flown_m: Scalar
-    bank_cmd_rad: Scalar
-    bank_rad: Scalar
-    load_g: Scalar
-    phase: Array
-    sigma_0_rad: Scalar  # corrector solution
-    predicted_miss_m: Scalar  # corrector residual at that solution (0 outside a PC cycle)
-    corrector_evals: Array  # predictions an early-exit corrector would make this step
-    r_m: Vector3  # ECI state
-    v_mps: Vector3
-    pulled_up: Array
-    drag_ratio: Scalar
-    lift_ratio: Scalar
-
-
-class _Flight(NamedTuple):
-    """Truth state of the flight, loads and heating, advanced by :func:`_truth_substep`.
-
-    The state is carried as components (:class:`EntryStateXYZ`) with the density at it, which
-    the next step's first right-hand side reuses. The chute crossing is located after the
-    loop, from the step that crossed: its start state, time and bank are kept."""
-
-    y: EntryStateXYZ
-    density: Scalar  # truth density at y, kg/m^3
-    t: Scalar
-    act: BankActuatorState
-    done: Array  # the chute altitude has been crossed
-    cross_y: EntryStateXYZ  # state at the start of the crossing step
-    cross_t: Scalar
-    cross_bank: Scalar  # bank flown over the crossing step
-    heat_load: Scalar
-    heat_peak: Scalar
-    load_peak: Scalar
-
-
-class _Carry(NamedTuple):
-    flight: _Flight
-    guidance: NamedTuple  # the law's state
 
 
 def dispersed_entry(sim: CapsuleSimulation, key):
@@ -211,16 +143,23 @@ def guidance_context(sim: CapsuleSimulation) -> EntryGuidanceContext:
     )
 
 
-def _truth_substep(sim: CapsuleSimulation, args: EntryArgs, command, f: _Flight) -> _Flight:
+def _truth_substep(
+    sim: CapsuleSimulation,
+    args: EntryArgs,
+    command,
+    f: tuple[CapsuleTruth, BankActuatorState, CapsuleTally],
+) -> tuple[CapsuleTruth, BankActuatorState, CapsuleTally]:
     """Bank actuator and one RK4 step of the truth (``args`` without the bank), with the
-    loads and heating at the end of the step. A finished flight (``done``) keeps its state
-    and time; the step that crosses the chute altitude is recorded for :func:`_chute_point`.
+    loads and heating at the end of the step, on ``(truth, actuator, tally)``. A finished
+    flight (``done``) keeps its state and time; the step that crosses the chute altitude is
+    recorded for :func:`_chute_point`.
 
     Four density lookups per step: the first stage reuses the density carried from the end
     of the previous step, whose lookup also gives the heat rate and the load."""
+    truth, act, tally = f
     dt = sim.dt_s
     earth, vehicle, atmosphere = args.earth, args.vehicle, args.atmosphere
-    act = sim.actuator.step(f.act, command, dt)
+    act = sim.actuator.step(act, command, dt)
     cos_b, sin_b = jnp.cos(act.bank), jnp.sin(act.bank)  # constant over the step
 
     def field(t, y, density=None):
@@ -229,41 +168,46 @@ def _truth_substep(sim: CapsuleSimulation, args: EntryArgs, command, f: _Flight)
         )
         return EntryStateXYZ(y.v, accel)
 
-    y1 = rk4_step(field, f.t, f.y, dt, k1=field(f.t, f.y, f.density))
+    y1 = rk4_step(field, truth.t, truth.y, dt, k1=field(truth.t, truth.y, truth.density))
     alt1, speed1, _ = altitude_speed_hdot(y1, earth)
     rho1 = atmosphere.density(alt1)
     q_dot = sutton_graves_heat_rate(rho1, speed1, vehicle.nose_radius_m)
     c_r = jnp.sqrt(vehicle.c_l**2 + vehicle.c_d**2)
     ng1 = 0.5 * rho1 * speed1**2 * vehicle.reference_area_m2 * c_r / (vehicle.mass_kg * G0)
-    cross = ~f.done & (alt1 < sim.chute_altitude_m)
-    keep = ~f.done
+    done = truth.done
+    cross = ~done & (alt1 < sim.chute_altitude_m)
+    keep = ~done
 
     def unless_done(old, new):
-        return jax.tree_util.tree_map(lambda a, b: jnp.where(f.done, a, b), old, new)
+        return jax.tree_util.tree_map(lambda a, b: jnp.where(done, a, b), old, new)
 
     def if_cross(new, old):
         return jax.tree_util.tree_map(lambda a, b: jnp.where(cross, a, b), new, old)
 
-    return _Flight(
-        y=unless_done(f.y, y1),
-        density=jnp.where(f.done, f.density, rho1),
-        t=f.t + jnp.where(f.done, 0.0, dt),
-        act=act,
-        done=f.done | cross,
-        cross_y=if_cross(f.y, f.cross_y),
-        cross_t=jnp.where(cross, f.t, f.cross_t),
-        cross_bank=jnp.where(cross, act.bank, f.cross_bank),
-        heat_load=f.heat_load + keep * q_dot * dt,
-        heat_peak=jnp.maximum(f.heat_peak, keep * q_dot),
-        load_peak=jnp.maximum(f.load_peak, keep * ng1),
+    truth_1 = CapsuleTruth(
+        y=unless_done(truth.y, y1),
+        density=jnp.where(done, truth.density, rho1),
+        t=truth.t + jnp.where(done, 0.0, dt),
+        done=done | cross,
     )
+    tally_1 = CapsuleTally(
+        cross_y=if_cross(truth.y, tally.cross_y),
+        cross_t=jnp.where(cross, truth.t, tally.cross_t),
+        cross_bank=jnp.where(cross, act.bank, tally.cross_bank),
+        heat_load=tally.heat_load + keep * q_dot * dt,
+        heat_peak=jnp.maximum(tally.heat_peak, keep * q_dot),
+        load_peak=jnp.maximum(tally.load_peak, keep * ng1),
+    )
+    return truth_1, act, tally_1
 
 
-def _chute_point(sim: CapsuleSimulation, args: EntryArgs, f: _Flight, y0: EntryState):
+def _chute_point(
+    sim: CapsuleSimulation, args: EntryArgs, f: CapsuleTruth, tally: CapsuleTally, y0: EntryState
+):
     """State and time at the chute altitude: the crossing inside the step that crossed it, by
     cubic Hermite interpolation (``y0`` and 0 for a flight that never crossed)."""
     dt, earth = sim.dt_s, args.earth
-    bank = f.cross_bank
+    bank = tally.cross_bank
 
     def accel(y):
         a, _ = entry_acceleration_xyz(
@@ -271,18 +215,18 @@ def _chute_point(sim: CapsuleSimulation, args: EntryArgs, f: _Flight, y0: EntryS
         )
         return jnp.stack(a)
 
-    alt0, _, hdot0 = altitude_speed_hdot(f.cross_y, earth)
+    alt0, _, hdot0 = altitude_speed_hdot(tally.cross_y, earth)
     alt1, _, hdot1 = altitude_speed_hdot(f.y, earth)
     sfrac = hermite_crossing(alt0, hdot0, alt1, hdot1, dt, sim.chute_altitude_m)
-    y_a, y_b = from_xyz(f.cross_y), from_xyz(f.y)
-    now = hermite_state(y_a, accel(f.cross_y), y_b, accel(f.y), dt, sfrac)
+    y_a, y_b = from_xyz(tally.cross_y), from_xyz(f.y)
+    now = hermite_state(y_a, accel(tally.cross_y), y_b, accel(f.y), dt, sfrac)
     chute = jax.tree_util.tree_map(lambda a, b: jnp.where(f.done, a, b), now, y0)
-    return chute, jnp.where(f.done, f.cross_t + sfrac * dt, 0.0)
+    return chute, jnp.where(f.done, tally.cross_t + sfrac * dt, 0.0)
 
 
-def _trace(y0: EntryState, c: _Carry, nav: EntryNav, command, g, earth) -> Trace:
+def _trace(y0: EntryState, c: LoopState, nav: EntryNav, command, g, earth) -> Trace:
     """This control step's trace: the state at its start, the command and the new law state."""
-    y, t = nav.y, c.flight.t
+    y, t = nav.y, c.truth.t
     fv = flight_variables(y, earth)
     return Trace(
         t_s=t,
@@ -290,7 +234,7 @@ def _trace(y0: EntryState, c: _Carry, nav: EntryNav, command, g, earth) -> Trace
         speed_mps=fv.speed_mps,
         range_flown_m=ground_range_m(y0.r, 0.0, y.r, t, earth),
         bank_cmd_rad=command,
-        bank_rad=c.flight.act.bank,
+        bank_rad=c.actuator.bank,
         load_g=jnp.sqrt(nav.drag_mps2**2 + nav.lift_mps2**2) / G0,
         phase=g.phase,
         sigma_0_rad=g.sigma_0,
@@ -302,6 +246,84 @@ def _trace(y0: EntryState, c: _Carry, nav: EntryNav, command, g, earth) -> Trace
         drag_ratio=g.drag_ratio,
         lift_ratio=g.lift_ratio,
     )
+
+
+def _start(sim: CapsuleSimulation, law: AbstractEntryGuidance, key: PRNGKeyArray):
+    """The run's draws and its initial :data:`CapsuleLoopState`: the dispersed entry, the
+    actuator holding ``hold_bank_rad``, the law's ``init`` from the first measurement."""
+    y0, vehicle, atmosphere, dispersion = dispersed_entry(sim, key)
+    draws = CapsuleDraws(y0, EntryArgs(vehicle, sim.earth, atmosphere, jnp.zeros(())), dispersion)
+    truth, actuator, tally = initial_flight(sim, y0, atmosphere)
+    law_state = law.init(_measure(sim, draws, y0), guidance_context(sim))
+    return LoopState(truth, (), law_state, actuator, tally), draws
+
+
+def initial_flight(sim: CapsuleSimulation, y0: EntryState, atmosphere: Atmosphere):
+    """``(truth, actuator, tally)`` at the entry interface ``y0`` (atmosphere: the truth's)."""
+    z = jnp.zeros(())
+    y0_xyz = to_xyz(y0)
+    truth = CapsuleTruth(
+        y=y0_xyz,
+        density=atmosphere.density(flight_variables(y0, sim.earth).altitude_m),
+        t=z,
+        done=jnp.asarray(False),
+    )
+    tally = CapsuleTally(
+        cross_y=y0_xyz, cross_t=z, cross_bank=z, heat_load=z, heat_peak=z, load_peak=z
+    )
+    return truth, sim.actuator.init(sim.hold_bank_rad), tally
+
+
+def _measure(sim: CapsuleSimulation, draws: CapsuleDraws, y: EntryState) -> EntryNav:
+    """The navigated (true) state and the accelerometer-measured drag and lift at ``y``."""
+    return EntryNav(y, *drag_and_lift(y, draws.truth.vehicle, sim.earth, draws.truth.atmosphere))
+
+
+def _run(sim: CapsuleSimulation, law: AbstractEntryGuidance, key, draws: CapsuleDraws, c, record):
+    """The control steps, in guidance cycles of ``pc_every`` (see :func:`simulate`)."""
+    ctx = guidance_context(sim)
+
+    def control_step(c: LoopState, j):
+        nav = _measure(sim, draws, from_xyz(c.truth.y))
+        step_ctx = eqx.tree_at(lambda x: x.cycle_start, ctx, j == 0, is_leaf=lambda x: x is None)
+        command, g = law.step(c.law, nav, c.truth.t, step_ctx)
+        (truth, actuator, tally), _ = jax.lax.scan(
+            lambda f, _: (_truth_substep(sim, draws.truth, command, f), None),
+            (c.truth, c.actuator, c.tally),
+            None,
+            length=sim.substeps,
+        )
+        rec = _trace(draws.y0, c, nav, command, g, sim.earth) if record else None
+        return LoopState(truth, c.estimate, g, actuator, tally), rec
+
+    def cycle(c: LoopState, n=sim.pc_every):
+        return jax.lax.scan(control_step, c, jnp.arange(n))
+
+    n_cycles, rest = divmod(sim.n_control, sim.pc_every)
+    if record:
+        c, rec = jax.lax.scan(lambda c, _: cycle(c), c, None, length=n_cycles)
+        rec = flatten_trace(rec)
+    else:
+        c, _ = jax.lax.while_loop(
+            lambda ck: (ck[1] < n_cycles) & ~ck[0].truth.done,
+            lambda ck: (cycle(ck[0])[0], ck[1] + 1),
+            (c, jnp.asarray(0, jnp.int32)),
+        )
+        rec = None
+    if rest:  # the control steps of a last, partial cycle (a finished flight is frozen)
+        c, tail = cycle(c, rest)
+        if record:
+            rec = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), rec, tail)
+    return c, rec
+
+
+def _finish(sim: CapsuleSimulation, law, key, draws: CapsuleDraws, c: LoopState):
+    """The chute point (:func:`_chute_point`) and the outcome (:func:`_outcome`)."""
+    chute, t_chute = _chute_point(sim, draws.truth, c.truth, c.tally, draws.y0)
+    return _outcome(sim, c, chute, t_chute, draws.dispersion)
+
+
+_closed_loop = closed_loop(_start, _run, _finish)
 
 
 def simulate(sim: CapsuleSimulation, law: AbstractEntryGuidance, key: PRNGKeyArray, record=False):
@@ -317,66 +339,11 @@ def simulate(sim: CapsuleSimulation, law: AbstractEntryGuidance, key: PRNGKeyArr
     are a ``while_loop`` that stops once the flight is down (under ``vmap``: once every run of
     the batch is; a finished flight is frozen either way, so the outcome is the same), with
     ``record`` a ``scan`` over the whole ``max_time_s`` for fixed-length traces."""
-    y0, vehicle, atmosphere, draws = dispersed_entry(sim, key)
-    truth = EntryArgs(vehicle, sim.earth, atmosphere, jnp.zeros(()))
-    ctx = guidance_context(sim)
-
-    def measure(y):
-        return EntryNav(y, *drag_and_lift(y, vehicle, sim.earth, atmosphere))
-
-    def control_step(c: _Carry, j):
-        nav = measure(from_xyz(c.flight.y))
-        step_ctx = eqx.tree_at(lambda x: x.cycle_start, ctx, j == 0, is_leaf=lambda x: x is None)
-        command, g = law.step(c.guidance, nav, c.flight.t, step_ctx)
-        flight, _ = jax.lax.scan(
-            lambda f, _: (_truth_substep(sim, truth, command, f), None),
-            c.flight,
-            None,
-            length=sim.substeps,
-        )
-        rec = _trace(y0, c, nav, command, g, sim.earth) if record else None
-        return _Carry(flight=flight, guidance=g), rec
-
-    def cycle(c: _Carry, n=sim.pc_every):
-        return jax.lax.scan(control_step, c, jnp.arange(n))
-
-    z = jnp.zeros(())
-    y0_xyz = to_xyz(y0)
-    flight = _Flight(
-        y=y0_xyz,
-        density=atmosphere.density(flight_variables(y0, sim.earth).altitude_m),
-        t=z,
-        act=sim.actuator.init(sim.hold_bank_rad),
-        done=jnp.asarray(False),
-        cross_y=y0_xyz,
-        cross_t=z,
-        cross_bank=z,
-        heat_load=z,
-        heat_peak=z,
-        load_peak=z,
-    )
-    c = _Carry(flight=flight, guidance=law.init(measure(y0), ctx))
-    n_cycles, rest = divmod(sim.n_control, sim.pc_every)
-    if record:
-        c, rec = jax.lax.scan(lambda c, _: cycle(c), c, None, length=n_cycles)
-        rec = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[2:]), rec)
-    else:
-        c, _ = jax.lax.while_loop(
-            lambda ck: (ck[1] < n_cycles) & ~ck[0].flight.done,
-            lambda ck: (cycle(ck[0])[0], ck[1] + 1),
-            (c, jnp.asarray(0, jnp.int32)),
-        )
-        rec = None
-    if rest:  # the control steps of a last, partial cycle (a finished flight is frozen)
-        c, tail = cycle(c, rest)
-        if record:
-            rec = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), rec, tail)
-    chute, t_chute = _chute_point(sim, truth, c.flight, y0)
-    return _outcome(sim, c, chute, t_chute, draws), rec
+    return _closed_loop(sim, law, key, record)
 
 
 def _outcome(
-    sim: CapsuleSimulation, c: _Carry, chute: EntryState, t_chute, draws
+    sim: CapsuleSimulation, c: LoopState, chute: EntryState, t_chute, draws
 ) -> CapsuleOutcome:
     """Chute-point errors against the nominal entry -> target track, loads, the law's log.
 
@@ -384,7 +351,7 @@ def _outcome(
     ``time_out`` (no chute crossing within ``max_time_s``), ``no_convergence`` (the last
     corrector cycle failed), ``out_of_domain`` (a downrange or crossrange miss beyond
     ``miss_limit_m``: the guidance lost the target), else ``ok``."""
-    earth, f, g = sim.earth, c.flight, c.guidance
+    earth, f, g = sim.earth, c.tally, c.law
     log = g.log
     nominal_start = unit(entry_state_from_conditions(sim.entry, earth).r)
     u_chute = unit(to_earth_fixed(chute.r, t_chute, earth.rotation_rate))
@@ -419,7 +386,7 @@ def _outcome(
         outcome,
         (
             (log.skipped_out, Status.skip_out),
-            (~f.done, Status.time_out),
+            (~c.truth.done, Status.time_out),
             (g.last_status != RootStatus.ok, Status.no_convergence),
             (
                 jnp.maximum(jnp.abs(along), jnp.abs(cross)) * r_e_km * 1e3 > sim.miss_limit_m,

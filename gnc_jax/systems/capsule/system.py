@@ -23,15 +23,13 @@ from . import simulation as capsule_sim
 from .envelope import LOAD_LIMIT_G, check_cells, draw_overlay
 from .figures import capsule_figures
 from .params import PARAMETER_MODULES, Entry, GuidanceParams, SimulationParams, loop_counts
-from .reference import law_reference
+from .reference import law_mission
 from .schema import check as check_config
 
-# Cost model of CapsuleSystem.steps_per_run: trajectory fractions of the paper scenario.
+# Cost model of CapsuleSystem.steps_per_run: trajectory fractions of the paper scenario (the
+# law's predictions per corrector cycle: its family's prediction_steps).
 MEAN_SPEED_FRACTION = 0.58  # chute range / (flight time x entry speed): 8000 km in 1250 s at 11
 FIRST_ENTRY_FRACTION = 0.16  # corrector-active first entry over the flight: (229 - 34) / 1250 s
-HORIZON_FRACTION = 0.56  # mean time to the switch point from a corrector cycle over the flight
-COAST_FRACTION = 0.6  # of that horizon flown in the predictor's coast steps (load < 0.02 g)
-PREDICTIONS_PER_CYCLE = 2.7  # mean predictions per corrector cycle (131 over 49 cycles)
 STEP_SECONDS = 1.5e-6  # s per step and device (benchmarks/capsule_cost.py): 0.6e-6 on the paper
 # scenario (256 runs in 0.69 s on 2 devices), 2.8e-6 and 3.4e-6 at 5000 and 2500 km
 
@@ -141,6 +139,9 @@ class CapsuleSystem(AbstractSystem):
 
     def check(self, config):
         check_config(config)
+        law = self.laws()[config["guidance"]["law"]]
+        altitude_m = float(from_scenario(Entry, config).altitude_m)
+        law.check_entry(config["guidance"][law.law_name], altitude_m)
 
     def steps_per_run(self, config):
         """Truth RK4 steps plus the predictor's RK4 steps (one truth-step equivalent each:
@@ -148,30 +149,23 @@ class CapsuleSystem(AbstractSystem):
 
         The truth loop runs until the flight is down (about ``range / (MEAN_SPEED_FRACTION
         * entry speed)``, at most ``max_time_s``) in steps of ``dt_s``. Each corrector cycle
-        of the first entry (about ``FIRST_ENTRY_FRACTION`` of the flight) makes about
-        ``PREDICTIONS_PER_CYCLE`` predictions (at most ``1 + n_bracket + n_iter``), each
-        integrating about ``HORIZON_FRACTION`` of the flight ahead, ``COAST_FRACTION`` of it
-        in steps of ``predictor_coast_dt_s`` and the rest in steps of ``predictor_dt_s``. The
+        of the first entry (about ``FIRST_ENTRY_FRACTION`` of the flight) costs the law's
+        :meth:`~gnc_jax.guidance.entry.base.AbstractEntryGuidance.prediction_steps`. The
         fractions are those of the paper scenario (256 runs: flight 1250 s, guidance
-        34-229 s, switch at 827 s, 2.7 predictions per cycle, 48 steps per prediction); the
-        estimate is within about x3 on the off-nominal cases of
+        34-229 s); the estimate is within about x3 on the off-nominal cases of
         ``benchmarks/capsule_cost.py``.
         """
         e = from_scenario(Entry, config)
         s = from_scenario(SimulationParams, config)
         clock = loop_counts(s, from_scenario(GuidanceParams, config))
-        g = config["guidance"]
-        law = g.get(g.get("law", self.default_law), {})
         flight_s = min(s.max_time_s, e.range_m / (MEAN_SPEED_FRACTION * float(e.speed_mps)))
         truth = math.ceil(flight_s / clock.dt_s)
-        dt = law.get("predictor_dt_s", 8.0)
-        dt_coast = law.get("predictor_coast_dt_s", 32.0)
-        horizon_s = HORIZON_FRACTION * flight_s
-        horizon = horizon_s * ((1.0 - COAST_FRACTION) / dt + COAST_FRACTION / dt_coast)
-        horizon = min(horizon, law.get("predictor_max_steps", 1000))
-        slots = 1 + law.get("n_bracket", 6) + law.get("n_iter", 6)
+        law = self.laws()[config["guidance"]["law"]]
+        per_cycle = law.prediction_steps(config["guidance"][law.law_name], flight_s)
+        if per_cycle is None:
+            return float(truth)
         cycles = FIRST_ENTRY_FRACTION * flight_s / clock.pc_period_s
-        return float(truth + cycles * min(PREDICTIONS_PER_CYCLE, slots) * horizon)
+        return float(truth + cycles * per_cycle)
 
     def envelope_check(self, configs, load_limit_g=None, runs=None, seed=None, **options):
         """The entry corridor and footprint pre-check of
@@ -184,11 +178,11 @@ class CapsuleSystem(AbstractSystem):
         draw_overlay(ax, envelope, x_key, y_key)
 
     def build(self, scenario):
-        """The simulation data and the law, handed the reference designed for it
-        (:func:`~gnc_jax.systems.capsule.reference.law_reference`) as its ``ctx``."""
+        """The simulation data and the law, handed the mission and the reference designed for
+        it (:func:`~gnc_jax.systems.capsule.reference.law_mission`) as its ``ctx``."""
         config, sim = scenario.config, capsule_sim.build(scenario)
         law = self.laws()[config["guidance"]["law"]]
-        return sim, self.build_law(config, law_reference(law, config, sim))
+        return sim, self.build_law(config, law_mission(law, config, sim))
 
     def simulate(self, params, law, key, record=False):
         return capsule_sim.simulate(params, law, key, record=record)
