@@ -17,11 +17,11 @@ How each Basilisk piece maps to gnc_jax (``simulation/impactor.py`` unless named
   a scenario with ``sun_distance_au`` > 0.
 - ``extForceTorque.ExtForceTorque`` fed a ``CmdForceInertialMsg`` <-> the engine: thrust
   ``throttle F (1 + burn magnitude error) direction`` tilted by the pointing error, both drawn at
-  each ignition (``_control_step``). Basilisk's ``thrusterDynamicEffector`` + ``thrFiringSchmitt``
-  cannot express the law's trigger: its Schmitt levels are fixed fractions of a requested on-time,
-  while the LOS law compares |omega| with switching curves that move at every step, and its
-  thrusters are body-fixed (the law steers an inertial direction). The engine is therefore the
-  external-force effector commanded by the guidance module.
+  each ignition (``systems.impactor.step.control_step``). Basilisk's ``thrusterDynamicEffector``
+  + ``thrFiringSchmitt`` cannot express the law's trigger: its Schmitt levels are fixed fractions
+  of a requested on-time, while the LOS law compares |omega| with switching curves that move at
+  every step, and its thrusters are body-fixed (the law steers an inertial direction). The engine
+  is therefore the external-force effector commanded by the guidance module.
 - ``ImpactorLOSGNC``, a Basilisk **Python module** (``sysModel.SysModel`` subclass with
   ``Reset``/``UpdateState``; reads ``SCStatesMsg``, writes ``CmdForceInertialMsg``) <-> the rest of
   the closed loop, transcribed in numpy with the same equations:

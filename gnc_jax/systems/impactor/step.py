@@ -9,6 +9,7 @@ import jax
 import jax.numpy as jnp
 
 from ..._numerics import V3, as_array, as_v3, computed_once
+from ..._types import Array
 from ...dynamics.impactor import rk4, tilt_direction
 from ...navigation.ekf import NIS_BOUND_2DOF, NavEstimate
 from ...navigation.packed_ekf import apply_gain, propagate_packed, unpack
@@ -107,12 +108,31 @@ def control_step(sim: ImpactorSimulation, law, accel_bias, record, state: LoopSt
 def image_step(
     sim: ImpactorSimulation, law, key, draws: ImpactorDraws, record, state: LoopState, i
 ):
-    """One image interval: image -> EKF update -> guidance ``plan`` -> control steps ->
-    accelerometer noise -> covariance propagation."""
-    ctx, err = sim.context, sim.errors
-    dt = ctx.dt_s
+    """One image interval: image -> EKF update -> guidance ``plan`` (:func:`begin_interval`) ->
+    control steps -> accelerometer noise -> covariance propagation (:func:`end_interval`)."""
+    dt = sim.context.dt_s
     n = sim.steps_per_image
-    t = i * ctx.image_interval_s
+    t = i * sim.context.image_interval_s
+    state, row = begin_interval(sim, law, key, draws, state, i, t)
+    k = jnp.arange(n)
+    inputs = (t + dt * k, dt * (n - k - 0.5))
+    # The truth state crosses the control steps as components (V3): its RK4 step then fuses
+    # into few elementwise kernels (measured 12 % of the whole closed loop, results bit for bit
+    # equal); the rest of the state stays in arrays, which the image step reads as vectors
+    # and matrices (all of it as components measured slower overall).
+    step = functools.partial(control_step, sim, law, draws.dispersion["accel_bias_mps2"], record)
+    inner, rec = jax.lax.scan(step, state._replace(truth=components(state.truth)), inputs)
+    state = inner._replace(truth=arrays(inner.truth))
+    return end_interval(sim, state, row), rec
+
+
+def begin_interval(
+    sim: ImpactorSimulation, law, key, draws: ImpactorDraws, state: LoopState, i, t
+) -> tuple[LoopState, Array]:
+    """Image ``i`` at time ``t``: the EKF update, the law's ``plan``, the interval's
+    accumulators reset and its row of the burn table (returned: its accelerometer normals are
+    used at the interval's end) set for the engine's ignitions."""
+    ctx = sim.context
     bias = draws.dispersion["attitude_bias_rad"]
     estimate, engine, tally = state.estimate, state.actuator, state.tally
 
@@ -162,15 +182,15 @@ def image_step(
             innovations_outside=tally.innovations_outside + outside,
         ),
     )
-    k = jnp.arange(n)
-    inputs = (t + dt * k, dt * (n - k - 0.5))
-    # The truth state crosses the control steps as components (V3): its RK4 step then fuses
-    # into few elementwise kernels (measured 12 % of the whole closed loop, results bit for bit
-    # equal); the rest of the state stays in arrays, which the image step reads as vectors
-    # and matrices (all of it as components measured slower overall).
-    step = functools.partial(control_step, sim, law, draws.dispersion["accel_bias_mps2"], record)
-    inner, rec = jax.lax.scan(step, state._replace(truth=components(state.truth)), inputs)
-    state = inner._replace(truth=arrays(inner.truth))
+    return state, row
+
+
+def end_interval(sim: ImpactorSimulation, state: LoopState, row) -> LoopState:
+    """The end of an image interval: the accelerometer's white noise reaches the estimate
+    (:func:`~.navigation.accel_noise`, from ``row[8:14]`` of the burn table), the covariance
+    grows, and the interval's burn and firings are counted."""
+    ctx, err = sim.context, sim.errors
+    dt = ctx.dt_s
     estimate, engine, tally = state.estimate, state.actuator, state.tally
     burned = estimate.accel_moments[0] > 0.0
     dr, dv = accel_noise(err.accel_noise_mps2 * dt, estimate.accel_moments, row[8:14])
@@ -187,7 +207,7 @@ def image_step(
         tally=tally._replace(
             firings=tally.firings + engine.ignitions_image, burn_time_s=tally.burn_time_s + tb
         ),
-    ), rec
+    )
 
 
 def components(tree):
@@ -204,4 +224,4 @@ def arrays(tree):
     return jax.tree_util.tree_map(lambda x: as_array(x), tree, is_leaf=is_v3)
 
 
-__all__ = ["arrays", "components", "control_step", "image_step"]
+__all__ = ["arrays", "begin_interval", "components", "control_step", "end_interval", "image_step"]
