@@ -13,7 +13,7 @@ import numpy as np
 from gnc_jax._numerics import computed_once, matmul
 from gnc_jax.dynamics.impactor import tilt_direction
 from gnc_jax.navigation.ekf import NavEstimate, los_model, predict_los, predict_measurement
-from gnc_jax.systems.impactor.simulation import _accel_noise
+from gnc_jax.systems.impactor.navigation import accel_noise
 
 
 def test_computed_once_is_the_function_with_its_derivatives():
@@ -57,12 +57,12 @@ def test_interval_accelerometer_noise_has_the_per_step_statistics():
     )
     # the closed form is linear in its two normals per axis: read its covariance off the map
     e = np.eye(6)
-    cols = [np.array(jnp.concatenate(_accel_noise(sigma * dt, moments, jnp.asarray(u)))) for u in e]
+    cols = [np.array(jnp.concatenate(accel_noise(sigma * dt, moments, jnp.asarray(u)))) for u in e]
     lin = np.stack(cols, axis=1)  # (dr, dv) = lin @ u
     cov_cf = (lin @ lin.T)[np.ix_([0, 3], [0, 3])]  # x axis: dr_x, dv_x
     np.testing.assert_allclose(cov_cf, cov_bf, rtol=0.02)
     # no firing: no noise
-    zero = _accel_noise(sigma * dt, jnp.zeros(3), jnp.ones(6))
+    zero = accel_noise(sigma * dt, jnp.zeros(3), jnp.ones(6))
     assert float(jnp.max(jnp.abs(jnp.concatenate(zero)))) == 0.0
 
 

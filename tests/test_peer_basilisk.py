@@ -15,7 +15,8 @@ import gnc_jax as gj  # noqa: E402
 from gnc_jax.dynamics.impactor import ImpactorState, RelativeDynamics, propagate  # noqa: E402
 from gnc_jax.geometry.bplane import b_plane_crossing  # noqa: E402
 from gnc_jax.navigation.ekf import NavEstimate, propagate_covariance  # noqa: E402
-from gnc_jax.systems.impactor.simulation import initial_conditions, take_image  # noqa: E402
+from gnc_jax.systems.impactor.draws import initial_conditions  # noqa: E402
+from gnc_jax.systems.impactor.navigation import take_image  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 from benchmarks.peers import basilisk_impactor as bsk  # noqa: E402

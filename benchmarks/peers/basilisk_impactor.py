@@ -17,11 +17,11 @@ How each Basilisk piece maps to gnc_jax (``simulation/impactor.py`` unless named
   a scenario with ``sun_distance_au`` > 0.
 - ``extForceTorque.ExtForceTorque`` fed a ``CmdForceInertialMsg`` <-> the engine: thrust
   ``throttle F (1 + burn magnitude error) direction`` tilted by the pointing error, both drawn at
-  each ignition (``_control_step``). Basilisk's ``thrusterDynamicEffector`` + ``thrFiringSchmitt``
-  cannot express the law's trigger: its Schmitt levels are fixed fractions of a requested on-time,
-  while the LOS law compares |omega| with switching curves that move at every step, and its
-  thrusters are body-fixed (the law steers an inertial direction). The engine is therefore the
-  external-force effector commanded by the guidance module.
+  each ignition (``systems.impactor.step.control_step``). Basilisk's ``thrusterDynamicEffector``
+  + ``thrFiringSchmitt`` cannot express the law's trigger: its Schmitt levels are fixed fractions
+  of a requested on-time, while the LOS law compares |omega| with switching curves that move at
+  every step, and its thrusters are body-fixed (the law steers an inertial direction). The engine
+  is therefore the external-force effector commanded by the guidance module.
 - ``ImpactorLOSGNC``, a Basilisk **Python module** (``sysModel.SysModel`` subclass with
   ``Reset``/``UpdateState``; reads ``SCStatesMsg``, writes ``CmdForceInertialMsg``) <-> the rest of
   the closed loop, transcribed in numpy with the same equations:
@@ -106,7 +106,7 @@ def b_plane_frame(v_inf, ref_normal) -> np.ndarray:
 
 def scenario_params(cfg: dict) -> dict:
     """SI parameters of the study from a validated impactor scenario's ``config`` (the same
-    derivations and roundings as gnc_jax's ``simulation.impactor.build``)."""
+    derivations and roundings as gnc_jax's ``systems.impactor.build``)."""
     a, sc, dy, cam, nv, er, g = (
         cfg[k]
         for k in (
@@ -268,7 +268,7 @@ def ekf_update_los(x, cov, z, c_est, sigma_rad):
 
 
 def take_image(x, cov, r_true, attitude_bias, w, p, up):
-    """One image and its EKF update (``simulation.impactor.take_image`` with the Gaussian
+    """One image and its EKF update (``systems.impactor.navigation.take_image`` with the Gaussian
     front end); ``w`` = 8 standard normals: 2 centroid, 3 attitude control, 3 knowledge."""
     c_cmd = camera_attitude(-x[:3], up)
     c_true = small_rotation(p["attitude_control_rad"] * w[2:5]) @ c_cmd

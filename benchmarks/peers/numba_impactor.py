@@ -18,7 +18,7 @@ hand.
 Two ways to feed it random numbers:
 
 * **fed**: the standard normals gnc_jax draws,
-  `gnc_jax.systems.impactor.simulation.run_draws` of each run's key, stacked over runs: the
+  `gnc_jax.systems.impactor.draws.run_draws` of each run's key, stacked over runs: the
   outcomes equal gnc_jax's run for run (``tests/test_peer_numba.py``);
 * **own**: the kernel draws its own normals with numba's ``np.random.standard_normal``
   (per-thread Mersenne twister, seeded ``seed + i`` for run ``i``), only what is used: 15 per run
@@ -53,7 +53,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import gnc_jax as gj  # first: float64 and one XLA device per core
-from gnc_jax.systems.impactor import simulation as _layout
+from gnc_jax.systems.impactor import draws as _layout
 
 try:
     import numba
@@ -600,7 +600,7 @@ def _run(
                     rh2 += vh2 * dt
                 throttle_prev = throttle
         if do_images:
-            if mom_a > 0.0:  # accelerometer white noise over the interval (_accel_noise)
+            if mom_a > 0.0:  # accelerometer white noise over the interval (accel_noise)
                 if own:
                     for j in range(12, 18):
                         w[j] = np.random.standard_normal()
@@ -708,7 +708,7 @@ def simulate_own(prm, c_bi, p0, n_images, steps, coast_steps, seed, do_images, d
 
 @functools.cache
 def _draws_function():
-    from gnc_jax.systems.impactor.simulation import run_draws
+    from gnc_jax.systems.impactor.draws import run_draws
 
     def draws(sim, seed, idx):
         return jax.vmap(lambda i: run_draws(sim, gj.run_key(seed, i)))(idx)

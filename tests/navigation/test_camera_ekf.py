@@ -16,7 +16,7 @@ from gnc_jax.navigation import (
     update_los,
 )
 from gnc_jax.navigation.camera import SERIES_ANGLE_MAX, rotate_rows, small_rotation_entries
-from gnc_jax.systems.impactor.simulation import attitude_bias_covariance
+from gnc_jax.systems.impactor.navigation import attitude_bias_covariance
 
 
 def test_small_rotation_matches_scipy():

@@ -24,8 +24,8 @@ from gnc_jax.navigation import (
     update_los,
 )
 from gnc_jax.params import schema_of
+from gnc_jax.systems.impactor.build import measurement_setup
 from gnc_jax.systems.impactor.params import ImpactorParams, NavigationParams
-from gnc_jax.systems.impactor.simulation import measurement_setup
 
 ALL_MEASUREMENTS = sorted(AbstractMeasurement.measurements)
 

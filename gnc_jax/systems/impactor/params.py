@@ -4,7 +4,7 @@ declared once.
 Every field of an impactor scenario is a :func:`~gnc_jax.params.param` of one of the Modules
 below: its default and range in the file's units (the papers' km, km/s, urad, ug, %), its
 conversion to SI, its meaning and its section. The schema (``gnc-jax list --fields``, the docs
-reference, validation) and the SI values that :func:`~gnc_jax.systems.impactor.simulation.build`
+reference, validation) and the SI values that :func:`~gnc_jax.systems.impactor.build.build`
 and the cost model use derive from these declarations (the error sources' Module is in
 :mod:`gnc_jax.systems.impactor.errors`); :func:`timeline` derives the mission times and loop
 sizes from them, in one place. The cross-field checks of a configuration are in

@@ -65,9 +65,20 @@ def _check_dv_budget(cfg: dict, tof: float) -> None:
 
 
 def check(cfg: dict) -> None:
-    """Cross-field and physical-domain checks of a validated impactor configuration."""
-    a, g, cam, dy = cfg["approach"], cfg["guidance"], cfg["camera"], cfg["dynamics"]
-    sc = cfg["spacecraft"]
+    """Cross-field and physical-domain checks of a validated impactor configuration, in this
+    order (the first that fails is reported): directions, range and time of flight, solar
+    tide, propellant, timeline, centroid window."""
+    tof, r = _check_approach(cfg)
+    _check_tide(cfg, r)
+    _check_propellant(cfg, tof)
+    _check_timeline(cfg, tof)
+    _check_window(cfg["camera"])
+
+
+def _check_directions(cfg: dict) -> None:
+    """The approach speed, the B-plane reference normal (not along the velocity) and the Sun
+    direction."""
+    a, dy = cfg["approach"], cfg["dynamics"]
     v = a["velocity_kmps"]
     speed = _norm(v)
     if not MIN_SPEED_KMPS <= speed <= 100.0:
@@ -88,7 +99,13 @@ def check(cfg: dict) -> None:
             "undefined); allowed: any vector not parallel to approach.velocity_kmps"
         )
     _direction("dynamics.sun_direction", dy["sun_direction"])
-    r = _norm(a["position_km"])
+
+
+def _check_approach(cfg: dict) -> tuple[float, float]:
+    """The directions, then the range (outside the target, at most 1e7 km) and the time of
+    flight (an approach, a terminal phase). Returns ``(time of flight s, range km)``."""
+    _check_directions(cfg)
+    r = _norm(cfg["approach"]["position_km"])
     radius = max(cfg["target"]["semi_axes_km"])
     if not MIN_RANGE_RADII * radius < r <= 1e7:
         raise ScenarioError(
@@ -108,20 +125,38 @@ def check(cfg: dict) -> None:
             "the B-plane frame is fixed by the initial velocity; longer approaches are a "
             "midcourse problem)"
         )
+    return tof, r
+
+
+def _check_tide(cfg: dict, r: float) -> None:
+    """The Sun far enough for the linearised tide over the approach range ``r`` (km)."""
     au_km = AU_M / 1e3
-    d = dy["sun_distance_au"]
+    d = cfg["dynamics"]["sun_distance_au"]
     if d != 0.0 and not (d >= MIN_SUN_AU and r <= MAX_TIDE_RATIO * d * au_km):
         raise ScenarioError(
             f"dynamics.sun_distance_au: {d:g} AU; allowed: 0 (no solar tide) or at least "
             f"{max(MIN_SUN_AU, r / (MAX_TIDE_RATIO * au_km)):.3g} AU ({MIN_SUN_AU:g} AU and "
             f"{1 / MAX_TIDE_RATIO:g} x the approach range: the tide is linearised)"
         )
+
+
+def _check_propellant(cfg: dict, tof: float) -> None:
+    """Less propellant than mass, and enough of it to reach the aim point
+    (:func:`_check_dv_budget`)."""
+    sc = cfg["spacecraft"]
     if not sc["propellant_kg"] < sc["mass_kg"]:
         raise ScenarioError(
             f"spacecraft.propellant_kg: {sc['propellant_kg']:g} kg is not less than "
             f"spacecraft.mass_kg = {sc['mass_kg']:g} kg; allowed: [0, mass_kg)"
         )
     _check_dv_budget(cfg, tof)
+
+
+def _check_timeline(cfg: dict, tof: float) -> None:
+    """The control step divides the image interval, the cut-off and retarget times fall
+    within the time of flight ``tof`` (s), and at least ``MIN_IMAGES`` images come before the
+    cut-off."""
+    g, cam = cfg["guidance"], cfg["camera"]
     ratio = cam["image_interval_s"] / g["dt_s"]
     if abs(ratio - round(ratio)) > 1e-9 * ratio:
         raise ScenarioError(
@@ -145,6 +180,10 @@ def check(cfg: dict) -> None:
             f"before the cut-off; allowed: at most "
             f"{(tof - g['cutoff_tgo_s']) / MIN_IMAGES:.4g} s ({MIN_IMAGES} images)"
         )
+
+
+def _check_window(cam: dict) -> None:
+    """The centroid window: odd, and inside the region of interest with a margin."""
     if cam["window_px"] % 2 == 0 or cam["window_px"] > cam["roi_px"] - 4:
         raise ScenarioError(
             f"camera.window_px: {cam['window_px']}; allowed: an odd number <= camera.roi_px - 4 "

@@ -1,8 +1,9 @@
 """The impactor system's contract: a small-body impactor's terminal phase (seeds 000 and 002).
 
-Truth, camera, EKF, guidance and engine are in :mod:`gnc_jax.systems.impactor.simulation`; the
-laws in the family :mod:`gnc_jax.guidance.impactor` (``los``, ``predictive``, ``pn`` and any law
-registered into it); the scenario fields in :mod:`gnc_jax.systems.impactor.params` and their
+One closed-loop run (truth, camera, EKF, guidance, engine) is
+:mod:`gnc_jax.systems.impactor.simulation`, its data built by :mod:`gnc_jax.systems.impactor.build`;
+the laws in the family :mod:`gnc_jax.guidance.impactor` (``los``, ``predictive``, ``pn`` and any
+law registered into it); the scenario fields in :mod:`gnc_jax.systems.impactor.params` and their
 cross-field checks in :mod:`gnc_jax.systems.impactor.schema`. This file ties them together,
 with the summary statistics and the report figures.
 """
@@ -25,6 +26,7 @@ from ...navigation.render import choose_binning, phase_offset_tangent, render_fr
 from ...plotting import ellipse_xy, pyplot, saver
 from ..base import AbstractSystem, TraceRequest, register_system
 from ..impact import IMPACT_LABELS, hit_statistics, impact_objective, impact_statistics
+from . import build as impactor_build
 from . import schema as impactor_scenario
 from . import simulation as impactor_sim
 from .params import PARAMETER_MODULES, ImpactorParams, timeline
@@ -49,7 +51,7 @@ def _impactor_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, 
 
 def _b_plane_points(plt, summary, runs, ok, scenario):
     """Impact points in the B-plane with their 1σ and 3σ ellipses (seed 000 eq. 17)."""
-    sim = impactor_sim.build(scenario)
+    sim = impactor_build.build(scenario)
     aim = np.asarray(sim.context.aim_final_m)
     b = np.stack([runs["b_t_m"][ok], runs["b_r_m"][ok]], axis=1)
 
@@ -154,7 +156,7 @@ def _centroid_frames_figure(scenario, trace, out: pathlib.Path) -> pathlib.Path:
     """
 
     plt = pyplot()
-    sim = impactor_sim.build(scenario)
+    sim = impactor_build.build(scenario)
     cam, tgt = sim.camera, sim.target
     t_end = float(trace.t_s[-1])
     times = [0.0, 0.5 * t_end, 0.85 * t_end, t_end - 660.0]  # the last: ~12 min before impact
@@ -271,7 +273,7 @@ class ImpactorSystem(AbstractSystem):
         measurement_class(config["navigation"]["measurement"]).check(config)
 
     def build(self, scenario):
-        sim = impactor_sim.build(scenario)
+        sim = impactor_build.build(scenario)
         return sim, self.build_law(scenario.config, sim.context)
 
     def simulate(self, params, law, key, record=False):

@@ -89,7 +89,8 @@ def test_image_update_equals_the_dense_joseph_ekf_with_rodrigues_attitudes():
         normalised_innovation_squared,
         predict_los,
     )
-    from gnc_jax.systems.impactor.simulation import initial_conditions, take_image
+    from gnc_jax.systems.impactor.draws import initial_conditions
+    from gnc_jax.systems.impactor.navigation import take_image
 
     scenario = gj.load_scenario("deep-impact-los")
     sim, _ = gj.build(scenario)
@@ -137,12 +138,8 @@ def test_camera_misalignment_rotates_the_measured_los_only():
 
     from gnc_jax.navigation.camera import camera_attitude
     from gnc_jax.navigation.packed_ekf import pack
-    from gnc_jax.systems.impactor.simulation import (
-        camera_attitudes,
-        camera_misalignment,
-        image_update,
-        initial_conditions,
-    )
+    from gnc_jax.systems.impactor.draws import camera_misalignment, initial_conditions
+    from gnc_jax.systems.impactor.navigation import camera_attitudes, image_update
 
     quiet = [  # no other attitude or centroiding error: the misalignment alone moves the LOS
         "errors.image_processing_urad=0.0",
@@ -181,7 +178,7 @@ def test_camera_misalignment_acts_as_an_unknown_attitude_bias(monkeypatch):
     import jax
     import jax.numpy as jnp
 
-    from gnc_jax.systems.impactor import simulation
+    from gnc_jax.systems.impactor import draws, simulation
 
     sigma = 300e-6  # rad: misses of hundreds of metres, against tens without it
     unknown = SHORT + ["navigation.consider_attitude_bias=false", "errors.attitude_bias_urad=0.0"]
@@ -196,7 +193,7 @@ def test_camera_misalignment_acts_as_an_unknown_attitude_bias(monkeypatch):
     assert mis.camera_misaligned and not base.camera_misaligned
     keys = jax.vmap(lambda i: gj.run_key(0, i))(jnp.arange(8))
     run = jax.jit(jax.vmap(lambda s, k: simulation.simulate(s, law, k)[0], in_axes=(None, 0)))
-    monkeypatch.setattr(simulation, "_MISALIGNMENT", simulation._ATT_BIAS)
+    monkeypatch.setattr(draws, "_MISALIGNMENT", draws._ATT_BIAS)
     a, b, c = run(base, keys), run(biased, keys), run(mis, keys)
     np.testing.assert_array_equal(b.status, c.status)
     for name in ("miss_t_m", "miss_r_m", "nav_position_error_m", "dv_mps"):
