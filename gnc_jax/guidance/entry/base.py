@@ -11,7 +11,7 @@ i.e. the lateral component of a banked lift vector is averaged out by the bank r
 bank magnitude follows a profile of Earth-relative speed.
 """
 
-from typing import TYPE_CHECKING, ClassVar, NamedTuple
+from typing import ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
@@ -35,9 +35,6 @@ from ...dynamics.entry import (
 )
 from ...geometry.sphere import central_angle, to_earth_fixed, unit
 from ..base import AbstractGuidanceLaw
-
-if TYPE_CHECKING:  # the reference module builds on this one
-    from .reference import ReferenceTrajectory
 
 
 class EntryModel(eqx.Module):
@@ -177,8 +174,9 @@ class AbstractEntryGuidance(AbstractGuidanceLaw):
     never by the law's field names: whether the law tracks a designed second-entry reference
     (:meth:`reference_switch_load_g`; the system then designs it for the scenario), the law's
     checks against the entry interface (:meth:`check_entry`) and the predictor's cost
-    (:meth:`prediction_steps`). It hands the law's ``from_config`` an :class:`EntryMission`
-    (SI units, the reference included) as ``ctx``.
+    (:meth:`prediction_steps`). It hands the law's ``from_config`` an
+    :class:`~gnc_jax.guidance.entry.reference.EntryMission` (SI units, the reference included)
+    as ``ctx``.
     """
 
     laws: ClassVar[dict[str, type]] = {}
@@ -203,21 +201,6 @@ class AbstractEntryGuidance(AbstractGuidanceLaw):
         predictor's share of the capsule system's ``steps_per_run``); ``None`` (the default):
         the law predicts nothing."""
         return None
-
-
-class EntryMission(NamedTuple):
-    """What the capsule system hands an entry law's ``from_config`` as its ``ctx``: the
-    mission data the law's fields depend on, in SI units.
-
-    Attributes:
-        chute_altitude_m: the chute deploys (guidance ends) below it, m.
-        reference: the second-entry reference designed for this vehicle, entry and target
-            (for a law whose :meth:`AbstractEntryGuidance.reference_switch_load_g` is not
-            ``None``), else ``None``.
-    """
-
-    chute_altitude_m: Scalar
-    reference: "ReferenceTrajectory | None" = None
 
 
 class FlightVariables(NamedTuple):

@@ -3,6 +3,8 @@ against Earth-relative speed with its switch state and the sensitivities of eq. 
 Designed offline by :mod:`gnc_jax.guidance.entry.design` (kept by
 :mod:`gnc_jax.guidance.entry.cache`) for each scenario by the capsule system."""
 
+from typing import NamedTuple
+
 import equinox as eqx
 import jax.numpy as jnp
 
@@ -104,3 +106,18 @@ class ReferenceTrajectory(eqx.Module):
             ]
         )
         return self.second_entry_range_m + jnp.dot(self.d_range_d_switch, delta)
+
+
+class EntryMission(NamedTuple):
+    """What the capsule system hands an entry law's ``from_config`` as its ``ctx``: the
+    mission data the law's fields depend on, in SI units.
+
+    Attributes:
+        chute_altitude_m: the chute deploys (guidance ends) below it, m.
+        reference: the second-entry reference designed for this vehicle, entry and target
+            (for a law whose :meth:`AbstractEntryGuidance.reference_switch_load_g` is not
+            ``None``), else ``None``.
+    """
+
+    chute_altitude_m: Scalar
+    reference: ReferenceTrajectory | None = None

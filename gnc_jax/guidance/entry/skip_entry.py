@@ -62,7 +62,6 @@ from ..base import register_law
 from .base import (
     AbstractEntryGuidance,
     EntryGuidanceContext,
-    EntryMission,
     EntryModel,
     EntryNav,
     flight_variables,
@@ -70,7 +69,7 @@ from .base import (
 from .corrector import corrector_cycle
 from .phases import bank_sign, hold_bank_rad, phase_events
 from .predictor import filter_ratios, profile, steps_per_cycle
-from .reference import ReferenceTrajectory
+from .reference import EntryMission, ReferenceTrajectory
 from .state import SkipEntryState, initial_log, updated_log
 from .tracking import switch_compensation, track
 

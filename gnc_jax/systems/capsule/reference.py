@@ -2,17 +2,17 @@
 entry and target, designed once (:func:`gnc_jax.guidance.entry.cache.reference_for`: the reach
 check, the design and the tabulation, behind a progress bar, then cached on disk) and handed to
 the guidance law, with the chute altitude, in its
-:class:`~gnc_jax.guidance.entry.base.EntryMission` by
+:class:`~gnc_jax.guidance.entry.reference.EntryMission` by
 :meth:`CapsuleSystem.build <gnc_jax.systems.capsule.CapsuleSystem.build>`.
 """
 
 import jax.numpy as jnp
 
 from ...dynamics.entry import entry_state_from_conditions
-from ...guidance.entry.base import AbstractEntryGuidance, EntryMission, EntryModel
+from ...guidance.entry.base import AbstractEntryGuidance, EntryModel
 from ...guidance.entry.cache import reference_for
 from ...guidance.entry.nominal import NominalProblem
-from ...guidance.entry.reference import ReferenceTrajectory
+from ...guidance.entry.reference import EntryMission, ReferenceTrajectory
 from ...params import from_scenario
 from .params import ReferenceDesignParams
 from .simulation import CapsuleSimulation
