@@ -87,8 +87,9 @@ def test_the_harness_sees_failures(monkeypatch):
 
     with monkeypatch.context() as m:
         import gnc_jax.montecarlo as mc
+        import gnc_jax.study as study
 
-        m.setattr(mc, "_nan_to_status", lambda outcomes: None)
+        m.setattr(study, "_nan_to_status", lambda outcomes: None)
         original = type(system).simulate
 
         def poisoned(self, params, law, key, record=False):
