@@ -105,18 +105,10 @@ def scan_in_blocks(step, carry, n: int, block: int, block_inputs):
     return carry, jax.tree_util.tree_map(lambda *x: jnp.concatenate(x), *traces)
 
 
-def zeros_like_fields(cls, **given):
-    """A NamedTuple ``cls`` of loop counters: the ``given`` fields, every other one a float64
-    zero scalar (counters that must be integers are passed in ``given``)."""
-    z = jnp.zeros(())
-    return cls(**{name: given.get(name, z) for name in cls._fields})
-
-
 __all__ = [
     "LoopState",
     "closed_loop",
     "with_status",
     "flatten_trace",
     "scan_in_blocks",
-    "zeros_like_fields",
 ]
