@@ -9,10 +9,11 @@ see ``gnc_jax._config``) with ``shard_map``; long studies run in chunks with a p
 Compilation happens once, ahead of time, and is timed separately from the study.
 """
 
-import dataclasses
 import functools
 import os
 import time
+from collections.abc import Callable
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -20,8 +21,20 @@ import numpy as np
 from jax.sharding import Mesh, PartitionSpec
 
 from ._random import run_key
-from .scenario import Scenario, ScenarioError
+from .backend import Backend, placement, require, select
+from .planner import (
+    LANES_FROM,
+    CostEstimate,
+    compiled_bytes,
+    estimate_cost,
+    memory_limit,
+    memory_refusal,
+    padded_chunk,
+)
+from .scenario import Scenario
 from .systems.base import AbstractSystem, get_system
+
+__all__ = ["LANES_FROM", "CostEstimate", "estimate_cost", "padded_chunk"]  # re-exported
 
 
 def build(scenario: Scenario):
@@ -30,17 +43,21 @@ def build(scenario: Scenario):
     return get_system(scenario.kind).build(scenario)
 
 
-def batch_function(system: AbstractSystem, n_devices: int | None = None):
+def batch_function(system: AbstractSystem, n_devices: int | None = None, devices=None):
     """``f(sim, law, seed, indices) -> outcomes`` vmapped over run indices, sharded over devices.
 
-    ``indices`` must have a length divisible by the number of devices.
+    ``devices``: JAX's default devices unless given (another platform's: the program is then
+    always placed on them through a mesh); ``indices`` must have a length divisible by the
+    number of devices.
     """
-    devices = jax.devices()[: n_devices or len(jax.devices())]
+    placed = devices is not None and devices[0].platform != jax.devices()[0].platform
+    devices = list(devices if devices is not None else jax.devices())
+    devices = devices[: n_devices or len(devices)]
 
     def per_device(sim, law, seed, indices):
         return jax.vmap(lambda i: system.simulate(sim, law, run_key(seed, i))[0])(indices)
 
-    if len(devices) == 1:
+    if len(devices) == 1 and not placed:
         return jax.jit(per_device), 1
     mesh = Mesh(np.array(devices), ("runs",))
     rep = PartitionSpec()
@@ -62,114 +79,19 @@ ANNOUNCE_S = 30.0
 """A study estimated to run longer than this announces its estimate and shows progress."""
 
 
-@dataclasses.dataclass(frozen=True)
-class CostEstimate:
-    """What a study will cost, estimated from the scenario alone (before any compilation).
-
-    Attributes:
-        runs: runs in the study; steps_per_run: simulation steps of one run (the system's
-        :meth:`~gnc_jax.systems.AbstractSystem.steps_per_run`; ``None`` when unknown);
-        n_devices: host devices the runs are split over; seconds: estimated wall time after
-        compilation, from the system's measured ``step_seconds`` (an estimate: within a
-        factor of about 3 on the development machine).
-    """
-
-    runs: int
-    steps_per_run: float | None
-    n_devices: int
-    seconds: float | None
-
-    def __str__(self) -> str:
-        if self.steps_per_run is None:
-            return f"{self.runs} runs (no cost model for this system)"
-        return (
-            f"{self.runs} runs x {self.steps_per_run:.3g} steps = "
-            f"{self.runs * self.steps_per_run:.3g} steps, about {_duration(self.seconds)} on "
-            f"{self.n_devices} device{'s' if self.n_devices > 1 else ''}"
-        )
-
-
-def _duration(seconds: float) -> str:
-    if seconds < 120:
-        return f"{seconds:.2g} s"
-    if seconds < 7200:
-        return f"{seconds / 60:.2g} min"
-    if seconds < 3 * 86400:
-        return f"{seconds / 3600:.2g} h"
-    return f"{seconds / 86400:.3g} days"
-
-
-def estimate_cost(scenario: Scenario, runs: int | None = None, n_devices: int | None = None):
-    """:class:`CostEstimate` of a study of ``scenario`` (nothing is built or compiled)."""
-    runs = scenario.runs if runs is None else runs
-    n_dev = min(n_devices or len(jax.devices()), len(jax.devices()))
-    system = get_system(scenario.kind)
-    steps = system.steps_per_run(scenario.config)
-    if steps is None:
-        return CostEstimate(runs, None, n_dev, None)
-    per_device = -(-runs // n_dev)
-    return CostEstimate(runs, float(steps), n_dev, per_device * steps * system.step_seconds)
-
-
-LANES_FROM = 64
-"""A device batch smaller than this many runs is never padded (see :func:`padded_chunk`)."""
-
-
-def padded_chunk(chunk: int, n_dev: int, lanes: int = 1) -> int:
-    """Runs per compiled call for ``chunk`` requested on ``n_dev`` devices: a whole number of
-    runs per device and, for a system whose ``vector_lanes`` is above 1 and from
-    ``LANES_FROM`` runs per device on, a multiple of ``lanes`` per device.
-
-    XLA on CPU vectorises a batch's elementwise loops over whole SIMD registers: a
-    ``deep-impact-los`` device batch that was not a multiple of the vector width (4 float64
-    with AVX2) ran 1.6x slower per run (2 devices: 1668 runs per device 261 us per run, 1669
-    runs 415 us). The extra runs are computed with their own keys and dropped; no run's outcome
-    depends on the padding. A loop dominated by lock-step waiting (the capsule's corrector)
-    gains nothing and pays for the extra runs, hence the per-system choice.
-    """
-    per_device = -(-chunk // n_dev)
-    if lanes > 1 and per_device >= LANES_FROM:
-        per_device = -(-per_device // lanes) * lanes
-    return per_device * n_dev
-
-
-def _physical_memory() -> int:
-    try:
-        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError, AttributeError):  # not POSIX: assume 8 GiB
-        return 8 << 30
-
-
-def _check_memory(compiled, chunk: int, limit_fraction: float) -> None:
-    """Refuse a chunk whose compiled program needs more than ``limit_fraction`` of the
-    machine's memory, before it runs (checked on the compiled executable's own figures)."""
-    try:
-        stats = compiled.memory_analysis()
-        need = stats.temp_size_in_bytes + stats.argument_size_in_bytes + stats.output_size_in_bytes
-    except Exception:  # a backend without memory analysis: nothing to check
-        return
-    limit = limit_fraction * _physical_memory()
-    if need > limit:
-        per_run = need / chunk
-        raise ScenarioError(
-            f"chunk_size: {chunk} runs need {need / 1e9:.3g} GB ({per_run / 1e3:.3g} kB per run),"
-            f" more than {limit_fraction:.0%} of this machine's {_physical_memory() / 1e9:.3g} GB;"
-            f" allowed: chunk_size <= {max(int(limit // per_run), 1)} (CLI --chunk-size)"
-        )
-
-
 _COMPILED: dict = {}
 
 
-def _compile(system, fn, n_dev, sim, law, seed_arr, chunk):
+def _compile(system, fn, devices, sim, law, seed_arr, chunk):
     """Ahead-of-time compile (timed), reusing an executable compiled for the same structure.
 
-    The cache key is everything the executable depends on: the system, the device count, the
+    The cache key is everything the executable depends on: the system, the devices, the
     chunk size and the tree structure (with static fields), shapes and dtypes of (sim, law).
     Gains and scenario values are arguments, so a new value does not recompile.
     """
     leaves, treedef = jax.tree_util.tree_flatten((sim, law))
-    key = (system, n_dev, chunk, treedef, tuple((jnp.shape(x), jnp.result_type(x)) for x in leaves))
+    shapes = tuple((jnp.shape(x), jnp.result_type(x)) for x in leaves)
+    key = (system, tuple(devices), chunk, treedef, shapes)
     if key in _COMPILED:
         return _COMPILED[key], 0.0
     t0 = time.perf_counter()
@@ -181,83 +103,152 @@ def _compile(system, fn, n_dev, sim, law, seed_arr, chunk):
     return compiled, compile_s
 
 
-def _run_local(scenario, system, seed, todo, chunk, n_devices, max_memory_fraction, finished):
+def _check_memory(compiled, batch: int, backend: Backend, fraction: float):
+    """``None`` when the compiled batch fits ``fraction`` of a device's memory, else the
+    :class:`ScenarioError` that refuses it (checked on the executable's own figures)."""
+    need = compiled_bytes(compiled)
+    limit = memory_limit(backend, fraction)
+    if need is None or need <= limit:
+        return None
+    return memory_refusal(need, batch, backend, fraction, limit)
+
+
+def _fitting_batch(system, fn, devices, sim, law, seed_arr, chunk, backend, plan):
+    """The compiled batch for chunks of ``chunk`` runs: the chunk itself, or, when it does not
+    fit the device's memory and the planner chose it (``plan.fixed`` false), the largest half,
+    quarter, ... that fits; ``(compiled, batch, compile_s)``."""
+    batch, compile_s = chunk, 0.0
+    while True:
+        compiled, seconds = _compile(system, fn, devices, sim, law, seed_arr, batch)
+        compile_s += seconds
+        refusal = _check_memory(compiled, batch, backend, plan.max_memory_fraction)
+        if refusal is None:
+            return compiled, batch, compile_s
+        if plan.fixed or batch <= len(devices):
+            raise refusal
+        batch = padded_chunk(-(-batch // 2), len(devices), system.vector_lanes)
+
+
+class LocalPlan(NamedTuple):
+    """How :func:`_run_local` runs: on ``backend`` (``n_devices`` of its devices), a batch
+    halved to fit ``max_memory_fraction`` of a device's memory unless ``fixed`` (the user's
+    chunk size), calling ``finished(chunk, outcomes)`` as each chunk is done."""
+
+    backend: Backend
+    n_devices: int | None
+    max_memory_fraction: float
+    fixed: bool
+    finished: Callable
+
+
+def _run_local(scenario, system, seed, todo, chunk, plan: LocalPlan):
     """The chunks ``todo`` on this process's devices; returns the compile time and the
     ``time.perf_counter()`` at which the runs started."""
-    sim, law = build(scenario)
-    fn, n_dev = batch_function(system, n_devices)
-    seed_arr = jnp.asarray(seed, dtype=jnp.uint32)
-    compiled, compile_s = _compile(system, fn, n_dev, sim, law, seed_arr, chunk)
-    _check_memory(compiled, chunk, max_memory_fraction)
+    with placement(plan.backend):
+        sim, law = build(scenario)
+        fn, n_dev = batch_function(system, plan.n_devices, plan.backend.devices)
+        devices = plan.backend.devices[:n_dev]
+        seed_arr = jnp.asarray(seed, dtype=jnp.uint32)
+        compiled, batch, compile_s = _fitting_batch(
+            system, fn, devices, sim, law, seed_arr, chunk, plan.backend, plan
+        )
 
-    def launch(c):
-        return compiled(sim, law, seed_arr, jnp.arange(c * chunk, (c + 1) * chunk))
+        def launch(c):
+            starts = range(c * chunk, (c + 1) * chunk, batch)
+            return [compiled(sim, law, seed_arr, jnp.arange(s, s + batch)) for s in starts]
 
-    # One chunk ahead: a device that finishes its share of a chunk starts on the next while
-    # the other devices and the host are still on this one.
-    t0 = time.perf_counter()
-    if todo:
-        pending = launch(todo[0])
-    for k, c in enumerate(todo):
-        out = pending
-        if k + 1 < len(todo):
-            pending = launch(todo[k + 1])
-        finished(c, out._asdict())
+        # One chunk ahead: a device that finishes its share of a chunk starts on the next
+        # while the other devices and the host are still on this one.
+        t0 = time.perf_counter()
+        if todo:
+            pending = launch(todo[0])
+        for k, c in enumerate(todo):
+            outs = pending
+            if k + 1 < len(todo):
+                pending = launch(todo[k + 1])
+            plan.finished(c, _joined(outs))
     return compile_s, t0
+
+
+def _joined(outs) -> dict:
+    """The outcomes of a chunk's batches, as one dict (a chunk is mostly one batch)."""
+    if len(outs) == 1:
+        return outs[0]._asdict()
+    parts = [o._asdict() for o in outs]
+    return {k: np.concatenate([np.asarray(p[k]) for p in parts]) for k in parts[0]}
 
 
 _BUILT: dict = {}
 
 
-def run_chunk(scenario: Scenario, seed: int, start: int, stop: int, chunk: int):
-    """Runs ``start .. stop-1`` of a study on this process's devices (a Dask worker's task):
+def run_chunk(
+    scenario: Scenario, seed: int, start: int, stop: int, chunk: int, device: str = "auto"
+):
+    """Runs ``start .. stop-1`` of a study on this process's ``device`` (a Dask worker's task):
     ``(outcomes as numpy arrays, compile time)``. The scenario is built and the chunk compiled
     once per process and chunk size (and read from JAX's persistent compilation cache when
     the worker was started with one)."""
     system = get_system(scenario.kind)
-    text = scenario.to_toml()
-    if text not in _BUILT:
-        _BUILT.clear()
-        _BUILT[text] = build(scenario)
-    sim, law = _BUILT[text]
-    fn, n_dev = batch_function(system)
-    padded = padded_chunk(chunk, n_dev, system.vector_lanes)
-    seed_arr = jnp.asarray(seed, dtype=jnp.uint32)
-    compiled, compile_s = _compile(system, fn, n_dev, sim, law, seed_arr, padded)
-    out = compiled(sim, law, seed_arr, jnp.arange(start, start + padded))
+    backend = select(device)
+    with placement(backend):
+        text = scenario.to_toml()
+        if text not in _BUILT:
+            _BUILT.clear()
+            _BUILT[text] = build(scenario)
+        sim, law = _BUILT[text]
+        fn, n_dev = batch_function(system, devices=backend.devices)
+        padded = padded_chunk(chunk, n_dev, system.vector_lanes)
+        seed_arr = jnp.asarray(seed, dtype=jnp.uint32)
+        compiled, compile_s = _compile(
+            system, fn, backend.devices[:n_dev], sim, law, seed_arr, padded
+        )
+        out = compiled(sim, law, seed_arr, jnp.arange(start, start + padded))
     return {k: np.asarray(v)[: stop - start] for k, v in out._asdict().items()}, compile_s
 
 
-def local_cluster(workers: int):
-    """A ``dask.distributed`` client of a local cluster of ``workers`` processes, the cores
-    split between them (``GNC_JAX_HOST_DEVICES``), with JAX's persistent compilation cache."""
-    try:
-        from dask.distributed import Client, LocalCluster
-    except ImportError:
-        raise ScenarioError(
-            "workers: needs dask.distributed; allowed: pip install 'gnc_jax[cluster]'"
-        ) from None
+def worker_environment(workers: int, gpus: int) -> dict[str, str]:
+    """Environment of each of ``workers`` local worker processes: its share of the cores
+    (``GNC_JAX_HOST_DEVICES``), JAX's persistent compilation cache and, where there are GPUs,
+    no preallocation and a share of each GPU's memory (JAX's default lets every process take
+    75 % of a GPU on its first computation, so a second worker would fail)."""
     import pathlib
 
     per = max(1, (os.cpu_count() or 1) // workers)
     cache = os.environ.get(
         "JAX_COMPILATION_CACHE_DIR", str(pathlib.Path.home() / ".cache" / "gnc_jax" / "xla")
     )
-    cluster = LocalCluster(
+    env = {"GNC_JAX_HOST_DEVICES": str(per), "JAX_COMPILATION_CACHE_DIR": cache}
+    if gpus:
+        sharing = max(1, -(-workers // gpus))  # worker processes per GPU
+        env["XLA_PYTHON_CLIENT_PREALLOCATE"] = os.environ.get(
+            "XLA_PYTHON_CLIENT_PREALLOCATE", "false"
+        )
+        env["XLA_PYTHON_CLIENT_MEM_FRACTION"] = os.environ.get(
+            "XLA_PYTHON_CLIENT_MEM_FRACTION", f"{0.9 / sharing:.3f}"
+        )
+    return env
+
+
+def local_cluster(workers: int, option: str = "workers"):
+    """A ``dask.distributed`` client of a local cluster of ``workers`` processes, the cores
+    (and GPUs' memory) split between them (:func:`worker_environment`)."""
+    distributed = require("dask.distributed", option)
+    gpus = len(select("auto").devices) if select("auto").platform == "gpu" else 0
+    cluster = distributed.LocalCluster(
         n_workers=workers,
         threads_per_worker=1,
         processes=True,
         dashboard_address=None,
-        env={"GNC_JAX_HOST_DEVICES": str(per), "JAX_COMPILATION_CACHE_DIR": cache},
+        env=worker_environment(workers, gpus),
     )
-    return Client(cluster)
+    return distributed.Client(cluster)
 
 
-def _run_distributed(scenario, seed, todo, bounds, chunk, client, workers, finished):
+def _run_distributed(scenario, seed, todo, bounds, chunk, client, workers, finished, device):
     """The chunks ``todo`` as tasks of a Dask client; returns ``(compile time, errors,
     workers, time.perf_counter() once the cluster was up)``. A lost worker's tasks are rerun
     elsewhere by Dask; a chunk that raises is reported and the others go on."""
-    from dask.distributed import as_completed
+    as_completed = require("dask.distributed", "workers").as_completed
 
     own = client is None
     if own:
@@ -266,7 +257,10 @@ def _run_distributed(scenario, seed, todo, bounds, chunk, client, workers, finis
         n_workers = len(client.scheduler_info()["workers"])
         t0 = time.perf_counter()
         futures = {
-            client.submit(run_chunk, scenario, seed, *bounds[c], chunk, pure=False): c for c in todo
+            client.submit(
+                run_chunk, scenario, seed, *bounds[c], chunk, device=device, pure=False
+            ): c
+            for c in todo
         }
         compile_s, errors = 0.0, []
         for fut in as_completed(futures):

@@ -120,6 +120,7 @@ def envelope(
     out=None,
     progress: bool = True,
     client=None,
+    device: str | None = None,
     **check_options,
 ) -> Envelope:
     """A grid of Monte Carlo studies of ``scenario`` (see the module docstring).
@@ -132,6 +133,7 @@ def envelope(
         progress: one line per cell on stderr.
         client: a ``dask.distributed.Client``: each cell's chunks run on its workers (the path
             of :func:`gnc_jax.run_study`; the cells one after another).
+        device: ``"cpu"``, ``"gpu"`` or ``"auto"`` (default), as in :func:`gnc_jax.run_study`.
         check_options: passed to the system's pre-check (the capsule: ``load_limit_g``).
     """
     axes = dict(parse_grid(g) for g in grid) if not isinstance(grid, dict) else dict(grid)
@@ -161,7 +163,9 @@ def envelope(
             continue
         t0 = time.perf_counter()
         try:
-            study = run_study(cell, runs=runs, seed=seed, progress=False, client=client)
+            study = run_study(
+                cell, runs=runs, seed=seed, progress=False, client=client, device=device
+            )
         except ScenarioError as e:
             row.update(status=REFUSED, reason=str(e))
             _say(progress, f"{head} refused: {e}")

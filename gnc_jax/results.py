@@ -16,11 +16,14 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from ._status import Status
+from .backend import describe_line
 from .scenario import ScenarioError, load_scenario
 from .systems.base import get_system
 
 
 def _machine_note(study) -> str:
+    if study.device:
+        return describe_line(study.device)
     return (
         f"{platform.machine()} {os.cpu_count()} cores, {study.n_devices} XLA host devices, "
         f"jax {jax.__version__}, {platform.python_implementation()} "
@@ -77,10 +80,13 @@ def summarize(study) -> dict[str, Any]:
         seed=study.seed,
         wall_s=round(study.wall_s, 4),
         compile_s=round(study.compile_s, 4),
+        write_s=round(study.write_s, 4),
         runs_per_s=round(study.runs / study.wall_s, 2) if study.wall_s > 0 else None,
         chunk_size=study.chunk_size,
         machine=_machine_note(study),
     )
+    if study.device:
+        out["device"] = dict(study.device)
     system = get_system(sc.kind)
     if system.laws():
         out["law"] = sc.config["guidance"]["law"]

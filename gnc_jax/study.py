@@ -13,20 +13,20 @@ import sys
 import time
 from typing import Any
 
-import jax
 import numpy as np
 from tqdm.auto import tqdm
 
 from ._status import Status
+from .backend import describe, require, select
 from .montecarlo import (
     ANNOUNCE_S,
     MAX_HOURS,
     MAX_MEMORY_FRACTION,
+    LocalPlan,
     _run_distributed,
     _run_local,
-    estimate_cost,
-    padded_chunk,
 )
+from .planner import estimate_cost, plan_chunk
 from .results import save_study, summarize
 from .scenario import Scenario, ScenarioError
 from .store import chunk_files
@@ -42,9 +42,13 @@ class Study:
             written to a directory (``run_study(..., out=DIR)``) they are read from its chunk
             files when first used, and :meth:`summary` reads only the columns it needs.
         compile_s: ahead-of-time compilation time (0 when an executable compiled earlier in
-            this process was reused); wall_s: the study's wall time after compilation.
+            this process was reused); wall_s: the study's wall time after compilation, less
+            the time spent writing chunks to the study directory (``write_s``).
         path: the study directory, if written to one; chunk_errors: chunks that raised
             (``{"chunk", "runs": [start, stop], "error"}``), their runs missing from the study.
+        device: where it ran (:func:`gnc_jax.backend.describe`: platform, device kind and
+            count, memory, jax/jaxlib/CUDA versions); write_s: seconds spent writing the
+            chunk files, summary and scenario to the study directory (0 without one).
     """
 
     scenario: Scenario
@@ -58,6 +62,8 @@ class Study:
     path: Any = None
     chunk_errors: tuple = ()
     workers: int | None = None
+    device: dict | None = None
+    write_s: float = 0.0
 
     def __post_init__(self):
         if self._outcomes is None and self.path is None:
@@ -120,6 +126,7 @@ def run_study(
     overwrite: bool = False,
     client=None,
     workers: int | None = None,
+    device: str | None = None,
 ) -> Study:
     """Run a Monte Carlo study of ``scenario``.
 
@@ -131,12 +138,13 @@ def run_study(
             ``chunk_per_device`` runs per device, or 1024 runs; a resumed study keeps its own).
         progress: show a progress bar (default: when stderr is a terminal and there are
             several chunks).
-        n_devices: host devices to shard over (default: all).
+        n_devices: devices to shard over (default: all of the chosen platform's).
         max_hours: refuse (:class:`~gnc_jax.scenario.ScenarioError`, before the reference
             design or compilation) a study whose :func:`estimate_cost` exceeds this many hours.
-        max_memory_fraction: refuse a chunk whose compiled program needs more than this
-            fraction of the machine's physical memory (checked after compilation, before any
-            run).
+        max_memory_fraction: bound on a compiled batch's memory, as a fraction of one
+            device's (a GPU's allocator limit; on the CPU the machine's physical memory),
+            checked after compilation, before any run: a chunk size the planner chose is
+            halved until it fits, a ``chunk_size`` given here is refused.
         out: a study directory (``gnc_jax.store``): each chunk is written there as soon as it
             finishes, the summary and scenario last; the returned study reads its outcomes
             from there. A directory holding another study is refused.
@@ -147,6 +155,9 @@ def run_study(
             worker compiles once per process; results come back to this process).
         workers: start a local Dask cluster of this many worker processes for the study
             (the cores are split between them).
+        device: ``"cpu"``, ``"gpu"`` or ``"auto"`` (default: JAX's default backend, a GPU
+            where JAX finds one); a GPU asked for where there is none is refused
+            (:mod:`gnc_jax.backend`). On a GPU a default chunk is as large as fits its memory.
 
     A study estimated to take more than ``ANNOUNCE_S`` seconds prints its estimate to stderr
     and runs in chunks of about 10 s each so that the progress bar has an ETA. Per-run
@@ -159,27 +170,35 @@ def run_study(
         runs, seed, chunk_size, out, resume, overwrite, client, workers, max_hours,
         max_memory_fraction,
     )  # fmt: skip
+    if workers is not None:  # before anything is built: one line naming the extra
+        require("dask.distributed", "workers")
     system = get_system(scenario.kind)
-    cost = _checked_cost(scenario, runs, n_devices, max_hours)
+    backend = select(device)
+    cost = _checked_cost(scenario, runs, n_devices, max_hours, backend)
+    fixed = chunk_size is not None
     if resume and chunk_size is None:
         chunk_size = _recorded_chunk_size(out)
     announce = cost.seconds is not None and cost.seconds > ANNOUNCE_S and progress is not False
     if announce:
         print(f"{scenario.name}: estimated {cost}", file=sys.stderr)
     distributed = client is not None or workers is not None
-    n_dev = min(n_devices or len(jax.devices()), len(jax.devices()))
-    chunk = _plan_chunk(system, runs, chunk_size, n_dev, announce, cost, distributed)
+    n_dev = min(n_devices or backend.count, backend.count)
+    chunk = plan_chunk(
+        system, runs, chunk_size, backend, n_dev, cost, announce, distributed, max_memory_fraction
+    )
     n_chunks = -(-runs // chunk)
     bounds = [(c * chunk, min((c + 1) * chunk, runs)) for c in range(n_chunks)]
     store = _open_store(out, scenario, seed, runs, chunk, resume, overwrite)
     try:
-        parts, compile_s, wall_s, n_workers = _run_chunks(
+        plan = LocalPlan(backend, n_devices, max_memory_fraction, fixed, None)
+        parts, compile_s, wall_s, n_workers, write_s = _run_chunks(
             scenario, system, seed, runs, chunk, bounds, store, progress, announce, distributed,
-            n_devices, max_memory_fraction, client, workers,
+            plan, client, workers, device,
         )  # fmt: skip
         return _finish(
-            scenario, runs, seed, parts, n_chunks, store, compile_s, wall_s, n_dev, chunk, n_workers
-        )
+            scenario, runs, seed, parts, n_chunks, store, compile_s, wall_s, n_dev, chunk,
+            n_workers, describe(backend, n_dev), write_s,
+        )  # fmt: skip
     finally:
         if store is not None:
             store.close()
@@ -222,9 +241,9 @@ def _check_request(
             )
 
 
-def _checked_cost(scenario, runs, n_devices, max_hours):
+def _checked_cost(scenario, runs, n_devices, max_hours, backend):
     """The study's :func:`estimate_cost`; :class:`ScenarioError` when over ``max_hours``."""
-    cost = estimate_cost(scenario, runs, n_devices)
+    cost = estimate_cost(scenario, runs, n_devices, backend)
     if cost.seconds is not None and cost.seconds > max_hours * 3600:
         raise ScenarioError(
             f"cost: {cost}; allowed: at most {max_hours:g} h (raise max_hours, CLI --max-hours, "
@@ -234,44 +253,25 @@ def _checked_cost(scenario, runs, n_devices, max_hours):
 
 
 def _finish(
-    scenario, runs, seed, parts, n_chunks, store, compile_s, wall_s, n_dev, chunk, n_workers
-):
+    scenario, runs, seed, parts, n_chunks, store, compile_s, wall_s, n_dev, chunk, n_workers,
+    device, write_s,
+):  # fmt: skip
     """The :class:`Study` of the finished chunks: in memory (``parts``), or read from ``store``
-    once its summary and scenario are written."""
+    once its summary and scenario are written (their writing counted in ``write_s``)."""
+    outcomes = None
     if store is None:
         fields = list(parts[0])
         outcomes = {k: np.concatenate([parts[c][k] for c in range(n_chunks)]) for k in fields}
-        return Study(
-            scenario, runs, seed, outcomes, compile_s, wall_s, n_dev, chunk, workers=n_workers
-        )
     study = Study(
-        scenario,
-        runs,
-        seed,
-        None,
-        compile_s,
-        wall_s,
-        n_dev,
-        chunk,
-        store.path,
-        workers=n_workers,
-    )
-    store.finish(study.summary(), scenario.to_toml())
+        scenario, runs, seed, outcomes, compile_s, wall_s, n_dev, chunk,
+        None if store is None else store.path, workers=n_workers, device=device,
+        write_s=write_s,
+    )  # fmt: skip
+    if store is not None:
+        t0 = time.perf_counter()
+        store.finish(study.summary(), scenario.to_toml())
+        study.write_s += time.perf_counter() - t0
     return study
-
-
-def _plan_chunk(system, runs, chunk_size, n_dev, announce, cost, distributed) -> int:
-    """Runs per chunk: ``chunk_size``, else equal chunks of at most the system's default (of
-    about 10 s each when the study is announced), padded for the devices when local."""
-    default_chunk = system.chunk_per_device * n_dev if system.chunk_per_device else 1024
-    if chunk_size is None and announce:  # chunks of about 10 s: a progress bar with an ETA
-        default_chunk = int(max(1, min(default_chunk, 10.0 * runs / cost.seconds)))
-    chunk = min(runs, chunk_size or default_chunk)
-    if chunk_size is None:  # equal chunks: the last one is not mostly padding
-        chunk = -(-runs // -(-runs // chunk))
-    if not distributed:
-        chunk = padded_chunk(chunk, n_dev, system.vector_lanes)
-    return chunk
 
 
 def _open_store(out, scenario, seed, runs, chunk, resume, overwrite):
@@ -294,11 +294,12 @@ def _open_store(out, scenario, seed, runs, chunk, resume, overwrite):
 
 def _run_chunks(
     scenario, system, seed, runs, chunk, bounds, store, progress, announce, distributed,
-    n_devices, max_memory_fraction, client, workers,
+    plan, client, workers, device,
 ):  # fmt: skip
-    """The chunks not yet in ``store``, run locally or on Dask workers with a progress bar;
-    each finished chunk goes to ``store`` (else into the returned ``parts``). Returns
-    ``(parts, compile_s, wall_s, workers)``; :class:`StudyError` if chunks raised."""
+    """The chunks not yet in ``store``, run locally (``plan``) or on Dask workers with a
+    progress bar; each finished chunk goes to ``store`` (else into the returned ``parts``).
+    Returns ``(parts, compile_s, wall_s, workers, write_s)``, ``wall_s`` less ``write_s``;
+    :class:`StudyError` if chunks raised."""
     n_chunks = len(bounds)
     todo = [c for c in range(n_chunks) if store is None or not store.valid_chunk(c, *bounds[c])]
     show = (
@@ -312,13 +313,17 @@ def _run_chunks(
         disable=not show,
     )
     parts: dict[int, dict] = {}
+    write_s = 0.0
 
     def finished(c, outcomes):
+        nonlocal write_s
         start, stop = bounds[c]
         outcomes = {k: np.asarray(v)[: stop - start] for k, v in outcomes.items()}
         _nan_to_status(outcomes)
         if store is not None:
+            t_write = time.perf_counter()
             store.write_chunk(c, start, outcomes)
+            write_s += time.perf_counter() - t_write
         else:
             parts[c] = outcomes
         bar.update(stop - start)
@@ -327,13 +332,12 @@ def _run_chunks(
     try:
         if distributed:
             compile_s, errors, n_workers, t0 = _run_distributed(
-                scenario, seed, todo, bounds, chunk, client, workers, finished
+                scenario, seed, todo, bounds, chunk, client, workers, finished, device
             )
             t0 += compile_s  # the workers compile first, all at once
         else:
-            compile_s, t0 = _run_local(
-                scenario, system, seed, todo, chunk, n_devices, max_memory_fraction, finished
-            )
+            plan = plan._replace(finished=finished)
+            compile_s, t0 = _run_local(scenario, system, seed, todo, chunk, plan)
             errors, n_workers = [], None
     except KeyboardInterrupt:
         if store is not None:
@@ -346,7 +350,7 @@ def _run_chunks(
         raise
     finally:
         bar.close()
-    wall_s = time.perf_counter() - t0
+    wall_s = time.perf_counter() - t0 - write_s
     if errors:
         where = f"; the other chunks are in {store.runs_dir}, --resume retries" if store else ""
         raise StudyError(
@@ -358,7 +362,7 @@ def _run_chunks(
             + where,
             errors,
         )
-    return parts, compile_s, wall_s, n_workers
+    return parts, compile_s, wall_s, n_workers, write_s
 
 
 class StudyError(RuntimeError):

@@ -72,3 +72,13 @@ def _study_limits(q) -> None:
         help=f"exit {EXIT_FAILED_RUNS} when more than this fraction of runs failed "
         f"(default {MAX_FAILED:g})",
     )
+
+
+def _device(q) -> None:
+    q.add_argument(
+        "--device",
+        choices=("cpu", "gpu", "auto"),
+        default=None,
+        help="where the runs run: cpu, gpu (needs JAX's GPU build: pip install "
+        "'gnc_jax[cuda12]') or auto (default: a GPU where JAX finds one)",
+    )

@@ -28,16 +28,12 @@ def _writable_dir(path) -> None:
 
 def _connect(address: str):
     """A Dask client of the scheduler at ``address``, or one line saying why not."""
+    from ..backend import require
     from ..scenario import ScenarioError
 
+    client_class = require("dask.distributed", "--scheduler").Client
     try:
-        from dask.distributed import Client
-    except ImportError:
-        raise ScenarioError(
-            "--scheduler: needs dask.distributed; allowed: pip install 'gnc_jax[cluster]'"
-        ) from None
-    try:
-        return Client(address, timeout=10)
+        return client_class(address, timeout=10)
     except (OSError, TimeoutError, ValueError) as e:
         raise ScenarioError(
             f"--scheduler {address}: cannot connect ({type(e).__name__}: {e}); allowed: the "
@@ -93,6 +89,7 @@ def cmd_run(args) -> int:
             overwrite=args.overwrite,
             client=client,
             workers=args.workers,
+            device=args.device,
         )
     finally:
         if client is not None:
@@ -100,7 +97,7 @@ def cmd_run(args) -> int:
     summary = study.summary()
     print(
         f"{scenario.name}: {study.runs} runs, compile {study.compile_s:.1f} s, "
-        f"study {study.wall_s:.2f} s on {study.n_devices} devices"
+        f"study {study.wall_s:.2f} s, write {study.write_s:.2f} s on {summary['machine']}"
     )
     _print_summary(summary)
     if args.set:
@@ -160,7 +157,7 @@ def cmd_envelope(args) -> int:
     elif args.workers:
         from ..montecarlo import local_cluster
 
-        client = local_cluster(args.workers)
+        client = local_cluster(args.workers, "--workers")
     try:
         env = envelope(
             scenario,
@@ -170,6 +167,7 @@ def cmd_envelope(args) -> int:
             out=args.out,
             progress=True,
             client=client,
+            device=args.device,
             **options,
         )
     finally:
@@ -210,6 +208,7 @@ def cmd_tune(args) -> int:
         eval_every=args.eval_every,
         eval_runs=args.eval_runs,
         callback=lambda rec: print(progress_line(rec, names), flush=True),
+        device=args.device,
     )
     print(
         f"{scenario.name}: {args.method}, {args.steps} steps of {args.batch} runs, compile "

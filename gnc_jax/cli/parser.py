@@ -3,6 +3,7 @@
 import argparse
 
 from .arguments import (
+    _device,
     _number,
     _Parser,
     _positive_int,
@@ -72,6 +73,7 @@ def _add_run(sub) -> None:
         "--overwrite", action="store_true", help="replace a study already in --out as a whole"
     )
     _where(q)
+    _device(q)
     _study_limits(q)
     q.set_defaults(func=cmd_run)
 
@@ -113,6 +115,7 @@ def _add_envelope(sub) -> None:
         help="capsule: the entry corridor's load limit (default 10 g)",
     )
     _where(q)
+    _device(q)
     q.set_defaults(func=cmd_envelope)
 
 
@@ -162,6 +165,7 @@ def _add_tune(sub) -> None:
     q.add_argument(
         "--eval-runs", type=_positive_int("--eval-runs"), default=256, help="runs of those"
     )
+    _device(q)
     q.set_defaults(func=cmd_tune)
 
 

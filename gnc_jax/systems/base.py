@@ -55,6 +55,23 @@ class TraceRequest(NamedTuple):
     single: bool = False
 
 
+class StepCost(NamedTuple):
+    """The cost model of one system on one platform: a study of ``runs`` runs of ``steps``
+    steps each on ``d`` devices takes ``ceil(runs / d) x steps x run_step_s + steps x
+    step_latency_s`` seconds after compilation (:func:`gnc_jax.estimate_cost`).
+
+    Attributes:
+        run_step_s: throughput term, seconds per run and step on one device.
+        step_latency_s: latency term, seconds per step of the strictly sequential loop,
+            whatever the batch (a GPU's kernel launches and synchronisation; ~0 on a CPU).
+        source: where the figures were measured.
+    """
+
+    run_step_s: float
+    step_latency_s: float
+    source: str
+
+
 class AbstractSystem(abc.ABC):
     """Base class of every system (see the module docstring).
 
@@ -75,7 +92,13 @@ class AbstractSystem(abc.ABC):
         example: a packaged scenario name (or a TOML path) of this system.
         test_overrides: ``{"section.field": value}`` that make ``example`` cheap for tests.
         step_seconds: measured wall seconds of one step (:meth:`steps_per_run`) on one core,
-            for the cost estimate.
+            the CPU's cost model (no latency term; :meth:`step_cost`).
+        step_costs: ``{platform: StepCost}`` of the other platforms, measured there with
+            ``benchmarks/cost_calibration.py --device``; a platform without one has no cost
+            estimate (:meth:`step_cost` is ``None``), never the CPU's figure.
+        run_bytes: device memory one run of the example scenario needs in a compiled batch
+            (the executable's temporary, argument and output bytes per run); the planner sizes
+            a GPU's chunks with it, the memory guard checks the compiled figure.
         chunk_per_device: runs per host device in one compiled call of a study, measured
             where the per-run time is lowest (a batch whose working set outgrows the core's
             cache, or whose lock-step loops wait longer for the slowest run, is slower per
@@ -105,6 +128,8 @@ class AbstractSystem(abc.ABC):
     batch_tolerance: ClassVar[tuple[float, float]] = (1e-9, 1e-9)
     test_overrides: ClassVar[dict[str, Any]] = {}
     step_seconds: ClassVar[float] = 1e-6
+    step_costs: ClassVar[dict[str, StepCost]] = {}
+    run_bytes: ClassVar[int] = 16_000
     chunk_per_device: ClassVar[int | None] = None
     vector_lanes: ClassVar[int] = 1
     envelope_metrics: ClassVar[dict[str, str]] = {"failed_fraction": "failed fraction"}
@@ -118,6 +143,14 @@ class AbstractSystem(abc.ABC):
         measured by ``benchmarks/cost_calibration.py``) it gives the cost estimate that
         :func:`gnc_jax.run_study` checks before the reference design or compilation.
         """
+        return None
+
+    def step_cost(self, platform: str) -> StepCost | None:
+        """The cost model on ``platform`` (``"cpu"``, ``"gpu"``); ``None``: not calibrated."""
+        if platform in self.step_costs:
+            return self.step_costs[platform]
+        if platform == "cpu":
+            return StepCost(self.step_seconds, 0.0, "one core of the development machine")
         return None
 
     # ---- scenario ----

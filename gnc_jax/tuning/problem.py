@@ -37,8 +37,8 @@ def _si_factors(scenario: Scenario, gains: list[Gain], law) -> list[float]:
 
 
 @functools.lru_cache(maxsize=16)
-def _batch_function(system):
-    return batch_function(system)
+def _batch_function(system, devices=None):
+    return batch_function(system, devices=devices)
 
 
 class TuningProblem:
@@ -47,8 +47,10 @@ class TuningProblem:
     are cached on the problem's static structure (:meth:`jitted`), so a second tuning of the
     same structure (another seed, other weights, other start values) does not recompile."""
 
-    def __init__(self, scenario, gains, objective, seed):
+    def __init__(self, scenario, gains, objective, seed, backend=None):
         self.scenario, self.system, self.seed = scenario, scenario.system, seed
+        placed = backend is not None and not backend.default
+        self.platform = backend.platform if placed else None  # None: JAX's default devices
         self.sim, self.law = build(scenario)
         self.gains = tuple(
             dataclasses.replace(g, si_per_file=f)
@@ -61,7 +63,7 @@ class TuningProblem:
                 lambda: self.system.simulate(self.sim, self.law, jax.random.key(0))[0]
             )
             _check_fields(objective, outcome._fields, self.system.name)
-        self.fn, self.n_dev = _batch_function(self.system)
+        self.fn, self.n_dev = _batch_function(self.system, backend.devices if placed else None)
         self.seed_arr = jnp.asarray(seed, dtype=jnp.uint32)
         self.term_weights = objective.weights
         spec = declared_params(type(self.law)).get("temperature")
@@ -75,7 +77,10 @@ class TuningProblem:
         return self.sim, self.law, self.seed_arr, self.term_weights
 
     def jitted(self, kind: str, build_fn):
-        key = (kind, self.system, self.objective.structure, self.param, self.gains, self.n_dev)
+        key = (
+            kind, self.system, self.objective.structure, self.param, self.gains, self.n_dev,
+            self.platform,
+        )  # fmt: skip
         if key not in _JITTED:
             if len(_JITTED) >= 32:
                 _JITTED.pop(next(iter(_JITTED)))
@@ -87,7 +92,10 @@ class TuningProblem:
         (reused for arguments of the same structure, shapes and dtypes; 0 s then)."""
         leaves, treedef = jax.tree_util.tree_flatten(args)
         shapes = tuple((jnp.shape(x), jnp.result_type(x)) for x in leaves)
-        key = (kind, self.system, self.objective.structure, self.param, self.gains, treedef, shapes)
+        key = (
+            kind, self.system, self.objective.structure, self.param, self.gains, treedef, shapes,
+            self.platform,
+        )  # fmt: skip
         if key in _COMPILED:
             return _COMPILED[key], 0.0
         t0 = time.perf_counter()

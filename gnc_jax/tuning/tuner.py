@@ -7,6 +7,7 @@ from collections.abc import Callable
 import jax.numpy as jnp
 import numpy as np
 
+from ..backend import placement, select
 from ..scenario import Scenario, ScenarioError, load_scenario
 from .evaluation import _hard_objective, evaluate_heldout
 from .objectives import parse_objective
@@ -40,6 +41,7 @@ def tune(
     check_every: int | None = None,
     overrides=(),
     callback: Callable[[dict], None] | None = None,
+    device: str | None = None,
 ) -> TuneResult:
     """Tune the gains ``params`` of ``scenario`` to minimise ``objective``.
 
@@ -74,6 +76,7 @@ def tune(
             (:attr:`TuneResult.training_check`); ``check_runs=0``: the last step's gains.
         overrides: ``section.field=value`` applied to ``scenario`` first.
         callback: called with each step's history record.
+        device: ``"cpu"``, ``"gpu"`` or ``"auto"`` (default), as in :func:`gnc_jax.run_study`.
 
     Raises:
         ScenarioError: bad input (unknown or non-tunable gain, bad objective, bad sizes),
@@ -89,39 +92,41 @@ def tune(
     )  # fmt: skip
     gains = resolve_gains(scenario, params)
     objective_ = parse_objective(objective, scenario)
-    problem = TuningProblem(scenario, gains, objective_, seed)
-    names = [g.name for g in gains]
-    initial = [float(scenario[n]) for n in names]
-    theta0 = problem.param.theta(initial)
-    opt = optimizer or default_optimizer(learning_rate, steps)
-    temps = _temperatures(problem, temperature, steps)
-    run = _run_adam if method == "adam" else _run_es
-    check_indices = np.arange(min(check_runs, train_runs))
-    monitor = dict(
-        eval_every=eval_every,
-        eval_runs=eval_runs,
-        check_runs=check_runs,
-        check_every=max(steps // 8, 1) if check_every is None else check_every,
-        check_indices=check_indices,
-    )
-    history, theta, compile_s, wall_s = run(
-        problem, theta0, opt, temps, batch, steps, train_runs, gradient, population, sigma,
-        monitor, callback, seed,
-    )  # fmt: skip
-    tuned = [float(x) for x in problem.param.gains(jnp.asarray(theta))]
-    check = None
-    if check_runs:
-        check, tuned = _training_check(problem, initial, check_indices, history)
-    tuned_scenario = _with_gains(scenario, names, tuned)
-    heldout = (
-        evaluate_heldout(problem, initial, tuned, heldout_runs, confidence=confidence)
-        if heldout_runs
-        else None
-    )
-    return TuneResult(
-        scenario, tuned_scenario, names, initial, tuned, objective_.spec, method, seed, batch,
-        steps, history, heldout, compile_s, wall_s, check,
-    )  # fmt: skip
+    backend = select(device)
+    with placement(backend):  # the gains, the runs and the optimiser on that platform
+        problem = TuningProblem(scenario, gains, objective_, seed, backend)
+        names = [g.name for g in gains]
+        initial = [float(scenario[n]) for n in names]
+        theta0 = problem.param.theta(initial)
+        opt = optimizer or default_optimizer(learning_rate, steps)
+        temps = _temperatures(problem, temperature, steps)
+        run = _run_adam if method == "adam" else _run_es
+        check_indices = np.arange(min(check_runs, train_runs))
+        monitor = dict(
+            eval_every=eval_every,
+            eval_runs=eval_runs,
+            check_runs=check_runs,
+            check_every=max(steps // 8, 1) if check_every is None else check_every,
+            check_indices=check_indices,
+        )
+        history, theta, compile_s, wall_s = run(
+            problem, theta0, opt, temps, batch, steps, train_runs, gradient, population, sigma,
+            monitor, callback, seed,
+        )  # fmt: skip
+        tuned = [float(x) for x in problem.param.gains(jnp.asarray(theta))]
+        check = None
+        if check_runs:
+            check, tuned = _training_check(problem, initial, check_indices, history)
+        tuned_scenario = _with_gains(scenario, names, tuned)
+        heldout = (
+            evaluate_heldout(problem, initial, tuned, heldout_runs, confidence=confidence)
+            if heldout_runs
+            else None
+        )
+        return TuneResult(
+            scenario, tuned_scenario, names, initial, tuned, objective_.spec, method, seed, batch,
+            steps, history, heldout, compile_s, wall_s, check,
+        )  # fmt: skip
 
 
 def _checked_sizes(
