@@ -25,10 +25,8 @@ from .systems.base import AbstractSystem, get_system
 PROGRESS_CHUNK_S = 10.0
 """An announced study runs in chunks of about this many seconds (a progress bar with an ETA)."""
 LATENCY_SHARE = 0.1
-"""On a GPU, progress chunks are only cut while their added latency stays under this share."""
-GPU_MEMORY_MARGIN = 2.0
-"""A GPU chunk is planned at ``run_bytes`` times this per run (XLA's GPU buffers differ from
-the CPU's measured figure); the compiled figure is checked after compilation."""
+"""On a GPU, progress chunks are only cut while their added latency (a latency term per chunk
+after the first) stays under this share of the estimate."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -172,14 +170,15 @@ def plan_chunk(
 def _device_chunk(system, runs, backend, n_dev, cost, announce, max_memory_fraction) -> int:
     """A GPU's default chunk: all runs that fit ``max_memory_fraction`` of each device's
     memory, cut for a progress bar only where the latency it adds is under ``LATENCY_SHARE``."""
-    fits = memory_limit(backend, max_memory_fraction) / (system.run_bytes * GPU_MEMORY_MARGIN)
+    # run_bytes is the CPU executable's figure (deep-impact-los: 15 kB per run, the H100's
+    # peak 8 kB); the GPU executable's own figure is checked once it is compiled
+    fits = memory_limit(backend, max_memory_fraction) / system.run_bytes
     chunk = int(max(1, min(runs, fits * n_dev)))
     if announce and cost.seconds is not None:
-        throughput_s = cost.seconds - cost.latency_s
-        n = throughput_s / PROGRESS_CHUNK_S
-        if cost.latency_s > 0:
-            n = min(n, LATENCY_SHARE * cost.seconds / cost.latency_s)
-        chunk = min(chunk, max(1, int(runs / max(n, 1.0))))
+        n = (cost.seconds - cost.latency_s) / PROGRESS_CHUNK_S
+        if cost.latency_s > 0:  # each chunk after the first adds one latency term
+            n = min(n, 1 + LATENCY_SHARE * cost.seconds / cost.latency_s)
+        chunk = min(chunk, -(-runs // max(int(n), 1)))
     return chunk
 
 

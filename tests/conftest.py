@@ -4,10 +4,14 @@ import shutil
 import sys
 import tempfile
 
-import jax
-import pytest
+# Test worker processes (pytest-xdist) share a GPU where there is one: none of them may take
+# JAX's default 75 % of its memory on its first computation.
+os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
 
-import gnc_jax  # noqa: F401  (turns on float64 and host devices before anything else)
+import jax  # noqa: E402
+import pytest  # noqa: E402
+
+import gnc_jax  # noqa: E402, F401  (turns on float64 and host devices before anything else)
 
 # The toy system of tests/toy_system.py is registered from outside the package, as a user's
 # would be; the family tests (tests/test_family.py) then cover it like every built-in system.

@@ -180,13 +180,13 @@ def test_the_cost_estimate_is_computed_from_the_scenario_alone():
 def test_a_chunk_too_large_for_memory_is_refused_before_it_runs(monkeypatch):
     scenario = gj.load_scenario(TOY)
     ran = []
-    real = montecarlo._check_memory
-    monkeypatch.setattr(montecarlo, "_check_memory", lambda c, n, f: (real(c, n, f), ran.append(n)))
+    real = montecarlo._joined  # every finished chunk's outcomes pass through it
+    monkeypatch.setattr(montecarlo, "_joined", lambda outs: (ran.append(1), real(outs))[1])
     with pytest.raises(
         ScenarioError, match=r"chunk_size: 1000 runs need .* allowed: chunk_size <="
     ):
         gj.run_study(scenario, runs=1000, chunk_size=1000, max_memory_fraction=1e-9)
-    assert ran == []  # refused inside the check, before any chunk ran
+    assert ran == []  # refused after compilation, before any chunk ran
 
 
 @pytest.mark.slow

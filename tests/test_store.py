@@ -251,10 +251,10 @@ def test_a_chunk_that_raises_is_reported_and_the_rest_go_on(toy, reference, tmp_
 
     run_chunk = montecarlo.run_chunk
 
-    def faulty(scenario, seed, start, stop, chunk):
+    def faulty(scenario, seed, start, stop, chunk, **options):
         if start == 2 * CHUNK:
             raise FloatingPointError("injected")
-        return run_chunk(scenario, seed, start, stop, chunk)
+        return run_chunk(scenario, seed, start, stop, chunk, **options)
 
     monkeypatch.setattr(montecarlo, "run_chunk", faulty)
     out = tmp_path / "study"

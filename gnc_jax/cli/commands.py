@@ -26,6 +26,13 @@ def _writable_dir(path) -> None:
         ) from None
 
 
+def _device(args) -> None:
+    """``--device`` checked before anything else (a GPU where JAX finds none: one line)."""
+    from ..backend import select
+
+    select(args.device)
+
+
 def _connect(address: str):
     """A Dask client of the scheduler at ``address``, or one line saying why not."""
     from ..backend import require
@@ -64,6 +71,7 @@ def cmd_list(args) -> int:
 
 
 def cmd_run(args) -> int:
+    _device(args)
     from ..scenario import ScenarioError, load_scenario
     from ..study import run_study
 
@@ -144,6 +152,7 @@ def cmd_reproduce(args) -> int:
 
 
 def cmd_envelope(args) -> int:
+    _device(args)
     from ..operating_envelope import envelope
     from ..scenario import load_scenario
 
@@ -189,6 +198,7 @@ def cmd_report(args) -> int:
 
 
 def cmd_tune(args) -> int:
+    _device(args)
     from ..scenario import load_scenario
     from ..tuning import progress_line, tune
 

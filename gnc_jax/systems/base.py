@@ -72,6 +72,11 @@ class StepCost(NamedTuple):
     source: str
 
 
+H100_SOURCE = "an H100 80GB (jax 0.11.2), one chunk per study: benchmarks/backend_probe_h100.json"
+"""Where the packaged systems' GPU cost models were measured (a package before the GPU
+planner: re-measure with ``benchmarks/cost_calibration.py --device gpu``)."""
+
+
 class AbstractSystem(abc.ABC):
     """Base class of every system (see the module docstring).
 

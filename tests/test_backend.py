@@ -1,0 +1,277 @@
+"""The backend of a study without a GPU: choosing the device and refusing a missing one, the
+planner's chunks, cost model and memory guard against a fake device (platform, memory limit),
+the optional parts' refusals, and what a study records of where it ran."""
+
+import math
+import pathlib
+import sys
+
+import jax
+import numpy as np
+import pytest
+
+import gnc_jax as gj
+from gnc_jax import _config, backend, cli, montecarlo, planner
+from gnc_jax.backend import Backend
+from gnc_jax.scenario import ScenarioError
+
+TOY = pathlib.Path(__file__).with_name("toy.toml")
+H100 = Backend("gpu", "NVIDIA H100 80GB HBM3", ("gpu:0",), int(60.8e9))
+"""A fake GPU: one device with the H100's allocator limit (75 % of its 80 GB)."""
+
+
+def fake(platform="gpu", memory_gb=60.8, count=1) -> Backend:
+    return Backend(platform, f"fake {platform}", tuple(range(count)), int(memory_gb * 1e9))
+
+
+def refused(argv, capsys, monkeypatch) -> str:
+    """The CLI's one-line refusal, before anything is built or compiled."""
+
+    def no_compile(*args, **kwargs):
+        raise AssertionError("compiled or built before refusing")
+
+    monkeypatch.setattr(montecarlo, "build", no_compile)
+    monkeypatch.setattr(montecarlo, "_compile", no_compile)
+    assert cli.main(argv) == cli.EXIT_REFUSED
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    return err
+
+
+# ---- choosing the device ---------------------------------------------------------------------
+
+
+def test_cpu_and_auto_are_the_cpu_host_devices_here():
+    cpu, auto = backend.select("cpu"), backend.select(None)
+    assert cpu.platform == auto.platform == "cpu" and cpu.devices == tuple(jax.devices())
+    assert cpu.memory_bytes == backend.physical_memory() > 0
+
+
+def test_a_gpu_where_there_is_none_is_refused_naming_the_extra(capsys, monkeypatch):
+    with pytest.raises(ScenarioError, match=r"device: gpu, .*no GPU.*gnc_jax\[cuda12\]"):
+        gj.run_study(gj.load_scenario(TOY), runs=4, device="gpu")
+    err = refused(["run", str(TOY), "--runs", "4", "--device", "gpu"], capsys, monkeypatch)
+    assert err.startswith("gnc-jax: error: device: gpu") and "gnc_jax[cuda12]" in err
+    out = ["--out", "/nonexistent/x"]  # the device is checked first
+    for command in (
+        ["envelope", str(TOY), "--grid", "a.b=1:2:2"],
+        ["tune", str(TOY), "--params", "a"],
+    ):
+        assert cli.main(command + out + ["--device", "gpu"]) == cli.EXIT_REFUSED
+        assert "gnc_jax[cuda12]" in capsys.readouterr().err
+
+
+def test_an_unknown_device_is_refused_in_one_line(capsys):
+    with pytest.raises(ScenarioError, match="device: 'tpu'; allowed: auto, cpu, gpu"):
+        backend.select("tpu")
+    with pytest.raises(SystemExit) as e:
+        cli.main(["run", str(TOY), "--device", "tpu"])
+    assert e.value.code == 2
+    assert "--device: invalid choice: 'tpu'" in capsys.readouterr().err
+
+
+# ---- optional parts --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("option", [["--workers", "2"], ["--scheduler", "tcp://127.0.0.1:1"]])
+def test_a_missing_cluster_extra_is_refused_naming_it(option, capsys, monkeypatch):
+    # ``None`` in sys.modules makes ``import dask.distributed`` raise ImportError, as it does
+    # after the README's install (no ``cluster`` extra).
+    monkeypatch.setitem(sys.modules, "dask.distributed", None)
+    err = refused(["run", "deep-impact-los", "--runs", "8", *option], capsys, monkeypatch)
+    assert "needs dask.distributed" in err and "pip install 'gnc_jax[cluster]'" in err
+    assert "internal error" not in err
+    with pytest.raises(ScenarioError, match=r"workers: needs dask.distributed.*\[cluster\]"):
+        gj.run_study(gj.load_scenario(TOY), runs=4, workers=2)
+
+
+def test_require_names_the_extra_of_each_optional_module(monkeypatch):
+    assert backend.require("numpy", "x") is np
+    for module, extra in backend.EXTRAS.items():
+        monkeypatch.setitem(sys.modules, module, None)
+        with pytest.raises(ScenarioError, match=rf"--opt: needs {module}.*gnc_jax\[{extra}\]"):
+            backend.require(module, "--opt")
+
+
+def test_dask_workers_share_a_gpu_without_preallocating_it(monkeypatch):
+    for var in ("XLA_PYTHON_CLIENT_PREALLOCATE", "XLA_PYTHON_CLIENT_MEM_FRACTION"):
+        monkeypatch.delenv(var, raising=False)
+    cpu_only = montecarlo.worker_environment(2, gpus=0)
+    assert "XLA_PYTHON_CLIENT_PREALLOCATE" not in cpu_only
+    for workers, gpus in [(1, 1), (2, 1), (3, 1), (4, 2), (3, 2)]:
+        env = montecarlo.worker_environment(workers, gpus)
+        assert env["XLA_PYTHON_CLIENT_PREALLOCATE"] == "false"
+        per_gpu = math.ceil(workers / gpus)  # the most workers one GPU holds
+        assert per_gpu * float(env["XLA_PYTHON_CLIENT_MEM_FRACTION"]) <= 0.9 + 1e-9
+    monkeypatch.setenv("XLA_PYTHON_CLIENT_MEM_FRACTION", "0.2")  # the user's choice is kept
+    assert montecarlo.worker_environment(2, 1)["XLA_PYTHON_CLIENT_MEM_FRACTION"] == "0.2"
+
+
+def test_the_host_device_flag_goes_before_a_bare_xla_token(monkeypatch):
+    monkeypatch.setenv("XLA_FLAGS", "intra_op_parallelism_threads=1")
+    monkeypatch.setenv("GNC_JAX_HOST_DEVICES", "3")
+    _config._configure_host_devices()
+    import os
+
+    flags = os.environ["XLA_FLAGS"].split()
+    assert flags == ["--xla_force_host_platform_device_count=3", "intra_op_parallelism_threads=1"]
+
+
+# ---- cost model ------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", ["deep-impact-los", "bennu-apn", "lunar-skip-entry"])
+def test_the_gpu_cost_is_throughput_plus_sequential_latency(name):
+    scenario = gj.load_scenario(name)
+    system = gj.get_system(scenario.kind)
+    steps = system.steps_per_run(scenario.config)
+    cost = system.step_cost("gpu")
+    for runs in (2_000, 200_000):
+        est = gj.estimate_cost(scenario, runs, device=H100)
+        want = runs * steps * cost.run_step_s + steps * cost.step_latency_s
+        assert est.seconds == pytest.approx(want) and est.platform == "gpu"
+        assert est.latency_s == pytest.approx(steps * cost.step_latency_s)
+    two_gpus = gj.estimate_cost(scenario, 200_000, device=fake(count=2))
+    assert two_gpus.seconds == pytest.approx(
+        100_000 * steps * cost.run_step_s + steps * cost.step_latency_s
+    )
+
+
+def test_bennu_on_a_gpu_is_latency_bound_and_not_refused():
+    # the H100's measured walls: 2,000 runs 6.5-7.2 s, 200,000 runs 25 s; the CPU's model
+    # estimated 26 min and over 24 h for them
+    scenario = gj.load_scenario("bennu-apn")
+    small, large = (gj.estimate_cost(scenario, n, device=H100) for n in (2_000, 200_000))
+    assert 6.5 / 3 < small.seconds < 7.2 * 3 and 25 / 3 < large.seconds < 25 * 3
+    assert small.latency_s / small.seconds > 0.9
+    assert "sequential-step latency" in str(small)
+    from gnc_jax.study import _checked_cost
+
+    assert _checked_cost(scenario, 200_000, None, 24.0, H100).seconds == large.seconds
+    with pytest.raises(ScenarioError, match="cost: 400000 runs"):
+        _checked_cost(scenario, 400_000, 1, 24.0, backend.select("cpu"))
+
+
+def test_the_cpu_estimate_is_unchanged_and_an_uncalibrated_platform_is_unknown():
+    scenario = gj.load_scenario("phoenix-midcourse")
+    system = gj.get_system(scenario.kind)
+    steps = system.steps_per_run(scenario.config)
+    cpu = gj.estimate_cost(scenario, 100, n_devices=1, device=fake("cpu"))
+    assert cpu.seconds == pytest.approx(100 * steps * system.step_seconds) and cpu.latency_s == 0
+    assert system.step_cost("gpu") is None
+    gpu = gj.estimate_cost(scenario, 100, device=H100)
+    assert gpu.seconds is None and "time unknown" in str(gpu) and "about" not in str(gpu)
+    assert "cost_calibration.py --device gpu" in str(gpu)
+
+
+# ---- chunks ----------------------------------------------------------------------------------
+
+
+def plan(name, runs, device, chunk_size=None, fraction=0.5, n_dev=None):
+    scenario = gj.load_scenario(name)
+    n_dev = n_dev or device.count
+    cost = gj.estimate_cost(scenario, runs, n_dev, device)
+    announce = cost.seconds is not None and cost.seconds > montecarlo.ANNOUNCE_S
+    system = gj.get_system(scenario.kind)
+    return planner.plan_chunk(
+        system, runs, chunk_size, device, n_dev, cost, announce, False, fraction
+    ), cost
+
+
+def test_cpu_chunks_are_the_cache_sized_ones():
+    # impactor: 2048 runs per device, equal chunks, padded to 8 lanes per device
+    # 6,000 runs on 2 devices (27 s: not announced): 2 chunks of 3000 -> 1500 per device ->
+    # 1504 -> 3008; 10,000 runs (45 s: announced): chunks of 10 s, 2247 runs -> 5 equal
+    # chunks of 2000
+    assert plan("deep-impact-los", 6_000, fake("cpu", count=2))[0] == 3008
+    assert plan("deep-impact-los", 10_000, fake("cpu", count=2))[0] == 2000
+    # capsule: 256 per device, no lanes: 1000 runs on 2 devices -> 2 chunks of 500
+    assert plan("lunar-skip-entry", 1000, fake("cpu", count=2))[0] == 500
+
+
+@pytest.mark.parametrize(
+    "name, runs", [("deep-impact-los", 1_000_000), ("bennu-apn", 200_000), ("bennu-apn", 2_000)]
+)
+def test_a_gpu_runs_what_fits_in_one_chunk(name, runs):
+    chunk, cost = plan(name, runs, H100)
+    assert chunk == runs, (chunk, str(cost))
+
+
+@pytest.mark.parametrize("memory_gb", [0.05, 1.0, 8.0])
+def test_gpu_chunks_fit_the_device_memory(memory_gb):
+    device = fake(memory_gb=memory_gb)
+    runs = 1_000_000
+    chunk, _ = plan("deep-impact-los", runs, device, fraction=0.5)
+    run_bytes = gj.get_system("impactor").run_bytes
+    assert chunk * run_bytes <= 0.5 * memory_gb * 1e9
+    n = math.ceil(runs / chunk)
+    assert (chunk - 1) * n < runs  # equal chunks: no fewer would fit
+    assert math.ceil(runs / (n - 1)) * run_bytes > 0.5 * memory_gb * 1e9 if n > 1 else True
+
+
+def test_a_long_gpu_study_is_cut_for_progress_only_where_latency_stays_small():
+    runs = 10_000_000  # ~50 s of throughput and 0.35 s latency per chunk: announced
+    chunk, cost = plan("deep-impact-los", runs, H100)
+    assert cost.seconds > montecarlo.ANNOUNCE_S
+    n = math.ceil(runs / chunk)
+    assert n > 1
+    assert (n - 1) * cost.latency_s <= planner.LATENCY_SHARE * cost.seconds
+    assert (cost.seconds - cost.latency_s) / n >= planner.PROGRESS_CHUNK_S
+    # bennu: 6.6 s of latency per chunk: a 96 s study is cut in 2, not in 9 chunks of 10 s
+    chunk, cost = plan("bennu-apn", 1_000_000, H100)
+    assert cost.seconds == pytest.approx(96.3, abs=1) and math.ceil(1_000_000 / chunk) == 2
+
+
+def test_the_chunk_size_asked_for_is_kept_on_a_gpu():
+    assert plan("deep-impact-los", 100_000, H100, chunk_size=25_000)[0] == 25_000
+
+
+# ---- memory guard ----------------------------------------------------------------------------
+
+
+def test_a_planned_chunk_too_large_for_memory_is_halved_an_asked_one_refused():
+    scenario = gj.load_scenario(TOY)
+    whole = gj.run_study(scenario, runs=64, chunk_size=64, progress=False)
+    sim, law = gj.build(scenario)
+    need = {n: _need(scenario, sim, law, n) for n in (64, 32)}
+    assert need[32] < need[64]
+    fraction = 0.5 * (need[32] + need[64]) / backend.physical_memory()  # 32 fits, 64 does not
+    halved = gj.run_study(scenario, runs=64, progress=False, max_memory_fraction=fraction)
+    assert halved.chunk_size == 64  # the chunk (store, progress) is kept; its batch halved
+    for field, x in whole.outcomes.items():
+        np.testing.assert_array_equal(halved.outcomes[field], x, err_msg=field)
+    with pytest.raises(ScenarioError, match=r"chunk_size: 64 runs need .* allowed: chunk_size <="):
+        gj.run_study(scenario, runs=64, chunk_size=64, max_memory_fraction=fraction)
+
+
+def _need(scenario, sim, law, n):
+    import jax.numpy as jnp
+
+    system = gj.get_system(scenario.kind)
+    fn, n_dev = montecarlo.batch_function(system)
+    devices = jax.devices()[:n_dev]
+    seed = jnp.asarray(0, jnp.uint32)
+    compiled, _ = montecarlo._compile(system, fn, devices, sim, law, seed, n)
+    return planner.compiled_bytes(compiled)
+
+
+def test_the_memory_refusal_names_the_gpu_and_its_limit():
+    e = planner.memory_refusal(int(40e9), 1_000_000, H100, 0.5, 0.5 * 60.8e9)
+    assert "NVIDIA H100 80GB HBM3's 60.8 GB" in str(e) and "chunk_size <= 760000" in str(e)
+
+
+# ---- the record ------------------------------------------------------------------------------
+
+
+def test_the_study_records_its_device(tmp_path, capsys):
+    out = tmp_path / "s"
+    assert cli.main(["run", str(TOY), "--runs", "8", "--out", str(out), "--device", "cpu"]) == 0
+    line = capsys.readouterr().out.splitlines()[0]
+    import json
+
+    summary = json.loads((out / "summary.json").read_text())
+    device = summary["device"]
+    assert device["platform"] == "cpu" and device["device_count"] == len(jax.devices())
+    assert device["jax"] == jax.__version__ and device["jaxlib"]
+    assert summary["write_s"] >= 0 and f"jax {jax.__version__}" in summary["machine"]
+    assert f"{len(jax.devices())} CPU host devices" in line and ", write " in line
