@@ -7,6 +7,12 @@ systems' ``step_seconds`` constants come from this script; the estimate is meant
 a factor of about 3, enough to refuse a runaway study and to size progress chunks.
 
     python benchmarks/cost_calibration.py [--system impactor] [--scale 1.0]
+    python benchmarks/cost_calibration.py --device gpu [--system intercept] [--scale 1.0]
+
+``--device gpu`` fits a system's GPU cost model (``StepCost``: seconds per run-step and per
+sequential step) from two studies of its example in one chunk each, a small and a large one
+(wall = steps x latency + runs x steps x throughput), prints the ``StepCost`` to put in the
+system's ``step_costs`` and the estimate against the measured wall for the cases above.
 """
 
 import argparse
@@ -40,11 +46,45 @@ CASES = {
 }
 
 
+GPU_CASES = {  # (scenario, small and large run count), each run in one chunk
+    "impactor": ("deep-impact-los", 2_000, 100_000),
+    "capsule": ("lunar-skip-entry", 10_000, 100_000),
+    "intercept": ("bennu-apn", 2_000, 20_000),
+    "midcourse": ("phoenix-midcourse", 200, 2_000),
+}
+
+
+def fit_device(system: str, device: str, scale: float):
+    """The system's :class:`~gnc_jax.systems.StepCost` on ``device``, from two studies."""
+    from gnc_jax.backend import describe, select
+    from gnc_jax.systems import StepCost
+
+    name, small, large = GPU_CASES[system]
+    scenario = gj.load_scenario(name)
+    steps = gj.get_system(scenario.kind).steps_per_run(scenario.config)
+    walls = []
+    for runs in (max(2, int(small * scale)), max(4, int(large * scale))):
+        for _ in range(2):  # the second call reuses the executable: its wall is the figure
+            study = gj.run_study(
+                scenario, runs=runs, chunk_size=runs, progress=False, device=device
+            )
+        walls.append((runs, study.wall_s))
+    (n1, w1), (n2, w2) = walls
+    throughput = max((w2 - w1) / ((n2 - n1) * steps), 0.0)
+    latency = max((w1 - n1 * steps * throughput) / steps, 0.0)
+    kind = describe(select(device))["device_kind"]
+    return StepCost(throughput, latency, f"{name} on {kind}: {n1} runs {w1:.3g} s, {n2} {w2:.3g} s")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--system", choices=sorted(CASES), action="append")
     parser.add_argument("--scale", type=float, default=1.0, help="multiply every run count")
+    parser.add_argument("--device", choices=("cpu", "gpu", "auto"), default="cpu")
     args = parser.parse_args()
+    if args.device != "cpu":
+        for system in args.system or sorted(GPU_CASES):
+            print(f"{system}: {fit_device(system, args.device, args.scale)!r}", flush=True)
     print(
         f"{'scenario':<24} {'overrides':<44} {'runs':>5} {'estimate s':>10} "
         f"{'measured s':>10} {'est/meas':>8}"
@@ -57,9 +97,9 @@ def main() -> None:
             except gj.ScenarioError as e:
                 print(f"{name:<24} {str(sets):<44} refused: {e}")
                 continue
-            estimate = estimate_cost(scenario, runs)
-            study = gj.run_study(scenario, runs=runs, progress=False)
-            study = gj.run_study(scenario, runs=runs, progress=False)  # compiled: wall only
+            estimate = estimate_cost(scenario, runs, device=args.device)
+            for _ in range(2):  # the second call is compiled: wall only
+                study = gj.run_study(scenario, runs=runs, progress=False, device=args.device)
             ratio = estimate.seconds / study.wall_s if estimate.seconds else float("nan")
             print(
                 f"{name:<24} {str(sets):<44} {runs:>5} {estimate.seconds or 0:>10.3g} "
