@@ -253,6 +253,17 @@ def _finish(proc: subprocess.Popen, timeout: float) -> int:
         return 124
 
 
+def _nvidia_smi() -> str | None:
+    query = "--query-gpu=name,memory.total,driver_version,clocks.max.sm,power.limit"
+    try:
+        proc = subprocess.run(
+            ["nvidia-smi", query, "--format=csv,noheader"], capture_output=True, text=True
+        )
+    except OSError:
+        return None
+    return proc.stdout.strip() or None
+
+
 def _part_result(args, name: str) -> dict | None:
     path = pathlib.Path(args.out) / "parts" / f"{name}.json"
     return json.loads(path.read_text()) if path.is_file() else None
@@ -303,7 +314,14 @@ def main() -> None:
         )
         return
     t0 = time.perf_counter()
-    doc = dict(command=" ".join(sys.argv), quick=args.quick, budget_s=args.budget, parts={})
+    doc = dict(
+        command=" ".join(sys.argv),
+        quick=args.quick,
+        budget_s=args.budget,
+        cpu_count=os.cpu_count(),
+        nvidia_smi=_nvidia_smi(),
+        parts={},
+    )
     report = pathlib.Path(args.out) / "acceptance.json"
     cores = sorted(os.sched_getaffinity(0))
     cpu_env = dict(os.environ, JAX_PLATFORMS="cpu", GNC_JAX_HOST_DEVICES="4")

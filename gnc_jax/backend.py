@@ -121,7 +121,8 @@ def versions() -> dict[str, str]:
         try:
             from jax.extend.backend import get_backend
 
-            out["cuda"] = str(get_backend("gpu").platform_version)
+            text = " ".join(str(get_backend("gpu").platform_version).split())
+            out["cuda"] = text[:80]
         except Exception:  # a JAX without that attribute: versions still recorded
             pass
     return out
