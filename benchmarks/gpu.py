@@ -110,6 +110,7 @@ def run(quick: bool = False, device: str | None = None, sizes=None) -> dict:
         markdown=_markdown(rows),
         notes=[
             f"device: {describe_line(info)}",
+            *(f"{r['name']}: skipped ({r['skipped']})" for r in rows if r.get("skipped")),
             f"{SCENARIO}, seed 0; walls after compilation (compile apart), best of two calls; "
             "ratio: throughput over the numba peer's (own draws, all cores) in the same run.",
         ],
