@@ -1,11 +1,14 @@
-"""The Monte Carlo engine: one ``vmap``ped single-trajectory simulator, sharded over host
-devices, compiled ahead of time and run chunk by chunk (locally or on Dask workers); the cost
-estimate and the memory guard; single runs and traces. :mod:`gnc_jax.study` builds studies on it.
+"""The Monte Carlo engine: one ``vmap``ped single-trajectory simulator, sharded over the
+devices of a backend (:mod:`gnc_jax.backend`: the CPU's host devices or a GPU), compiled ahead of
+time and run chunk by chunk (locally or on Dask workers), a batch halved where the memory guard
+of :mod:`gnc_jax.planner` finds it too large; single runs and traces. :mod:`gnc_jax.study`
+builds studies on it.
 
 Run ``i`` of a study with root seed ``s`` always uses the key
 ``jax.random.fold_in(jax.random.key(s), i)``, so a run's result never depends on the batch size,
-the chunking or the number of devices. Batches are split over the host devices (one per core,
-see ``gnc_jax._config``) with ``shard_map``; long studies run in chunks with a progress bar.
+the chunking or the number of devices. On the CPU batches are split over the host devices (one
+per core, see ``gnc_jax._config``) with ``shard_map``; long studies run in chunks with a
+progress bar.
 Compilation happens once, ahead of time, and is timed separately from the study.
 """
 
@@ -74,7 +77,8 @@ def batch_function(system: AbstractSystem, n_devices: int | None = None, devices
 MAX_HOURS = 24.0
 """Default bound on a study's estimated wall time; above it :func:`run_study` refuses."""
 MAX_MEMORY_FRACTION = 0.5
-"""Default bound on a chunk's memory, as a fraction of the machine's physical memory."""
+"""Default bound on a compiled batch's memory, as a fraction of one device's memory (a GPU's
+allocator limit; on the CPU the machine's physical memory)."""
 ANNOUNCE_S = 30.0
 """A study estimated to run longer than this announces its estimate and shows progress."""
 
