@@ -41,10 +41,11 @@ def refused(argv, capsys, monkeypatch) -> str:
 # ---- choosing the device ---------------------------------------------------------------------
 
 
-def test_cpu_and_auto_are_the_cpu_host_devices_here():
+def test_cpu_is_the_host_devices_and_auto_jax_default():
     cpu, auto = backend.select("cpu"), backend.select(None)
-    assert cpu.platform == auto.platform == "cpu" and cpu.devices == tuple(jax.devices())
+    assert cpu.platform == "cpu" and cpu.devices == tuple(jax.devices("cpu"))
     assert cpu.memory_bytes == backend.physical_memory() > 0
+    assert auto.devices == tuple(jax.devices()) and auto.default
 
 
 def test_a_gpu_where_there_is_none_is_refused_naming_the_extra(capsys, monkeypatch):
@@ -271,7 +272,8 @@ def test_the_study_records_its_device(tmp_path, capsys):
 
     summary = json.loads((out / "summary.json").read_text())
     device = summary["device"]
-    assert device["platform"] == "cpu" and device["device_count"] == len(jax.devices())
+    n_cpu = len(jax.devices("cpu"))
+    assert device["platform"] == "cpu" and device["device_count"] == n_cpu
     assert device["jax"] == jax.__version__ and device["jaxlib"]
     assert summary["write_s"] >= 0 and f"jax {jax.__version__}" in summary["machine"]
-    assert f"{len(jax.devices())} CPU host devices" in line and ", write " in line
+    assert f"{n_cpu} CPU host devices" in line and ", write " in line
