@@ -49,12 +49,12 @@ def build(scenario: Scenario):
 def batch_function(system: AbstractSystem, n_devices: int | None = None, devices=None):
     """``f(sim, law, seed, indices) -> outcomes`` vmapped over run indices, sharded over devices.
 
-    ``devices``: JAX's default devices unless given (another platform's: the program is then
-    always placed on them through a mesh); ``indices`` must have a length divisible by the
-    number of devices.
+    ``devices``: JAX's default devices unless given (another platform's, or the CPU's where
+    the default is a GPU: the program is then always placed on them through a mesh, even on
+    one device); ``indices`` must have a length divisible by the number of devices.
     """
-    placed = devices is not None and devices[0].platform != jax.devices()[0].platform
-    devices = list(devices if devices is not None else jax.devices())
+    placed = devices is not None
+    devices = list(devices if placed else jax.devices())
     devices = devices[: n_devices or len(devices)]
 
     def per_device(sim, law, seed, indices):
@@ -86,16 +86,17 @@ ANNOUNCE_S = 30.0
 _COMPILED: dict = {}
 
 
-def _compile(system, fn, devices, sim, law, seed_arr, chunk):
+def _compile(system, fn, where, sim, law, seed_arr, chunk):
     """Ahead-of-time compile (timed), reusing an executable compiled for the same structure.
 
-    The cache key is everything the executable depends on: the system, the devices, the
-    chunk size and the tree structure (with static fields), shapes and dtypes of (sim, law).
-    Gains and scenario values are arguments, so a new value does not recompile.
+    The cache key is everything the executable depends on: the system, ``where`` it runs
+    (:func:`_where`: the devices and whether the program is placed on them), the chunk size and
+    the tree structure (with static fields), shapes and dtypes of (sim, law). Gains and
+    scenario values are arguments, so a new value does not recompile.
     """
     leaves, treedef = jax.tree_util.tree_flatten((sim, law))
     shapes = tuple((jnp.shape(x), jnp.result_type(x)) for x in leaves)
-    key = (system, tuple(devices), chunk, treedef, shapes)
+    key = (system, where, chunk, treedef, shapes)
     if key in _COMPILED:
         return _COMPILED[key], 0.0
     t0 = time.perf_counter()
@@ -123,7 +124,9 @@ def _fitting_batch(system, fn, devices, sim, law, seed_arr, chunk, backend, plan
     quarter, ... that fits; ``(compiled, batch, compile_s)``."""
     batch, compile_s = chunk, 0.0
     while True:
-        compiled, seconds = _compile(system, fn, devices, sim, law, seed_arr, batch)
+        compiled, seconds = _compile(
+            system, fn, _where(backend, devices), sim, law, seed_arr, batch
+        )
         compile_s += seconds
         refusal = _check_memory(compiled, batch, backend, plan.max_memory_fraction)
         if refusal is None:
@@ -145,12 +148,23 @@ class LocalPlan(NamedTuple):
     finished: Callable
 
 
+def _where(backend: Backend, devices) -> tuple:
+    """What an executable is compiled for: the devices, and whether it is placed on them
+    (:func:`batch_function`'s mesh for a non-default platform)."""
+    return (tuple(devices), not backend.default)
+
+
+def _placed_devices(backend: Backend):
+    """The devices :func:`batch_function` places the program on (``None``: JAX's default)."""
+    return None if backend.default else backend.devices
+
+
 def _run_local(scenario, system, seed, todo, chunk, plan: LocalPlan):
     """The chunks ``todo`` on this process's devices; returns the compile time and the
     ``time.perf_counter()`` at which the runs started."""
     with placement(plan.backend):
         sim, law = build(scenario)
-        fn, n_dev = batch_function(system, plan.n_devices, plan.backend.devices)
+        fn, n_dev = batch_function(system, plan.n_devices, _placed_devices(plan.backend))
         devices = plan.backend.devices[:n_dev]
         seed_arr = jnp.asarray(seed, dtype=jnp.uint32)
         compiled, batch, compile_s = _fitting_batch(
@@ -200,12 +214,11 @@ def run_chunk(
             _BUILT.clear()
             _BUILT[text] = build(scenario)
         sim, law = _BUILT[text]
-        fn, n_dev = batch_function(system, devices=backend.devices)
+        fn, n_dev = batch_function(system, devices=_placed_devices(backend))
         padded = padded_chunk(chunk, n_dev, system.vector_lanes)
         seed_arr = jnp.asarray(seed, dtype=jnp.uint32)
-        compiled, compile_s = _compile(
-            system, fn, backend.devices[:n_dev], sim, law, seed_arr, padded
-        )
+        where = _where(backend, backend.devices[:n_dev])
+        compiled, compile_s = _compile(system, fn, where, sim, law, seed_arr, padded)
         out = compiled(sim, law, seed_arr, jnp.arange(start, start + padded))
     return {k: np.asarray(v)[: stop - start] for k, v in out._asdict().items()}, compile_s
 

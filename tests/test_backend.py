@@ -252,13 +252,40 @@ def _need(scenario, sim, law, n):
     fn, n_dev = montecarlo.batch_function(system)
     devices = jax.devices()[:n_dev]
     seed = jnp.asarray(0, jnp.uint32)
-    compiled, _ = montecarlo._compile(system, fn, devices, sim, law, seed, n)
+    where = montecarlo._where(backend.select("auto"), devices)
+    compiled, _ = montecarlo._compile(system, fn, where, sim, law, seed, n)
     return planner.compiled_bytes(compiled)
 
 
 def test_the_memory_refusal_names_the_gpu_and_its_limit():
     e = planner.memory_refusal(int(40e9), 1_000_000, H100, 0.5, 0.5 * 60.8e9)
     assert "NVIDIA H100 80GB HBM3's 60.8 GB" in str(e) and "chunk_size <= 760000" in str(e)
+
+
+def test_a_study_placed_on_a_non_default_platform_equals_the_default_one(monkeypatch):
+    # what ``device="cpu"`` does on a machine whose default is a GPU: the program placed on the
+    # chosen devices through a mesh (even for one device) and the arrays made there
+    scenario = gj.load_scenario(TOY)
+    reference = gj.run_study(scenario, runs=8, n_devices=1, progress=False)
+    cpu = backend.select("cpu")
+    placed = Backend(cpu.platform, cpu.device_kind, cpu.devices, cpu.memory_bytes, default=False)
+    from gnc_jax import study as study_module
+
+    monkeypatch.setattr(study_module, "select", lambda device: placed)
+    calls = []
+    real = montecarlo.batch_function
+
+    def recorded(system, n_devices=None, devices=None):
+        calls.append(devices)
+        return real(system, n_devices, devices)
+
+    monkeypatch.setattr(montecarlo, "batch_function", recorded)
+    other = gj.run_study(scenario, runs=8, n_devices=1, progress=False)
+    assert calls == [placed.devices]
+    assert other.compile_s > 0  # its own executable, not the default program's
+    rtol, atol = gj.get_system(scenario.kind).batch_tolerance
+    for field, x in reference.outcomes.items():
+        np.testing.assert_allclose(other.outcomes[field], x, rtol=rtol, atol=atol, err_msg=field)
 
 
 # ---- the record ------------------------------------------------------------------------------
