@@ -5,6 +5,8 @@ a value that is never zero on the branch that is kept (the usual double-``where`
 ``0 * inf`` reaches the gradient of the branch that is thrown away.
 """
 
+import contextlib
+import contextvars
 from typing import NamedTuple
 
 import jax
@@ -136,6 +138,61 @@ def matmul(a: Float[Array, "n k"], b: Float[Array, "k m"]) -> Float[Array, "n m"
     return jnp.stack(rows)
 
 
+class LoopShape(NamedTuple):
+    """How the closed loops are laid out for the compiler; the results are the same up to
+    rounding (within each family's ``batch_tolerance``), the speed is not.
+
+    ``fence``: compute a guidance command once into memory (:func:`computed_once`) instead of
+    leaving it to XLA's fusion. ``unroll``: control steps per trip of the innermost closed-loop
+    ``lax.scan``.
+
+    The defaults are per platform (:func:`for_platform`), measured on each: on a CPU a fence
+    saves XLA recomputing the command in every consumer loop and unrolling gains nothing; on
+    a GPU a fence is a ``lax.cond`` whose predicate costs a trip to the host every step, and
+    each scan trip a launch and a synchronisation, so the GPU's loops run unfenced and
+    unrolled (``bennu-apn``, 2,000 runs on an H100: 6.4 s fenced, 4.1 s unfenced, 2.6 s
+    unfenced and unrolled 4 times; per-run outcomes equal to the last bit there).
+    """
+
+    fence: bool = True
+    unroll: int = 1
+
+
+_PLATFORM_SHAPES = {"cpu": LoopShape(fence=True, unroll=1)}
+_ACCELERATOR_SHAPE = LoopShape(fence=False, unroll=4)
+_LOOP_SHAPE: contextvars.ContextVar = contextvars.ContextVar("loop_shape", default=None)
+
+
+def for_platform(platform: str) -> LoopShape:
+    """The default :class:`LoopShape` of a JAX platform (``"cpu"``, ``"gpu"``, ``"cuda"``, ...)."""
+    return _PLATFORM_SHAPES.get(platform, _ACCELERATOR_SHAPE)
+
+
+def loop_shape() -> LoopShape:
+    """The :class:`LoopShape` that code traced now is laid out with: the one set by
+    :func:`using_loop_shape`, else the default of JAX's default backend."""
+    shape = _LOOP_SHAPE.get()
+    return for_platform(jax.default_backend()) if shape is None else shape
+
+
+def explicit_loop_shape() -> LoopShape | None:
+    """The :class:`LoopShape` set by :func:`using_loop_shape`, or None."""
+    return _LOOP_SHAPE.get()
+
+
+@contextlib.contextmanager
+def using_loop_shape(shape: LoopShape | None):
+    """Trace the closed loops with ``shape`` inside the block (None: the platform's default),
+    e.g. to run the GPU's layout on a CPU. Compiled programs are cached per shape."""
+    if shape is not None and (not isinstance(shape.unroll, int) or shape.unroll < 1):
+        raise ValueError(f"LoopShape.unroll = {shape.unroll!r}: allowed an integer >= 1")
+    token = _LOOP_SHAPE.set(shape)
+    try:
+        yield
+    finally:
+        _LOOP_SHAPE.reset(token)
+
+
 def computed_once(fn, live, *args):
     """``fn(*args)``, computed once into memory before its consumers run.
 
@@ -148,8 +205,11 @@ def computed_once(fn, live, *args):
     ``live`` must be a runtime scalar shared by the batch (e.g. the scan's time input), so
     that under ``vmap`` the predicate stays unbatched.
 
-    Differentiable in forward and reverse mode (a conditional is).
+    Differentiable in forward and reverse mode (a conditional is). Under a
+    :class:`LoopShape` without fences (a GPU's default) this is ``fn(*args)``.
     """
+    if not loop_shape().fence:
+        return fn(*args)
     out = jax.eval_shape(fn, *args)
 
     def skipped(*_):
@@ -190,6 +250,7 @@ def safe_unit(v: Vector3, fallback: Vector3) -> Vector3:
 
 
 __all__ = [
+    "LoopShape",
     "V3",
     "as_array",
     "as_v3",
@@ -197,6 +258,9 @@ __all__ = [
     "computed_once",
     "cross3",
     "dot3",
+    "explicit_loop_shape",
+    "for_platform",
+    "loop_shape",
     "matmul",
     "matvec3",
     "norm3",
@@ -204,4 +268,5 @@ __all__ = [
     "safe_unit",
     "smooth_norm",
     "sub3",
+    "using_loop_shape",
 ]

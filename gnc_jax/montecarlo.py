@@ -23,6 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, PartitionSpec
 
+from ._numerics import explicit_loop_shape, for_platform, loop_shape, using_loop_shape
 from ._random import run_key
 from .backend import Backend, placement, require, select
 from .planner import (
@@ -90,17 +91,21 @@ def _compile(system, fn, where, sim, law, seed_arr, chunk):
     """Ahead-of-time compile (timed), reusing an executable compiled for the same structure.
 
     The cache key is everything the executable depends on: the system, ``where`` it runs
-    (:func:`_where`: the devices and whether the program is placed on them), the chunk size and
-    the tree structure (with static fields), shapes and dtypes of (sim, law). Gains and
-    scenario values are arguments, so a new value does not recompile.
+    (:func:`_where`: the devices and whether the program is placed on them), the chunk size,
+    the loop layout (:class:`~gnc_jax._numerics.LoopShape`: the one set by the caller, else
+    the devices' platform default) and the tree structure (with static fields), shapes and
+    dtypes of (sim, law). Gains and scenario values are arguments, so a new value does not
+    recompile.
     """
+    shape = explicit_loop_shape() or for_platform(where[0][0].platform)
     leaves, treedef = jax.tree_util.tree_flatten((sim, law))
     shapes = tuple((jnp.shape(x), jnp.result_type(x)) for x in leaves)
-    key = (system, where, chunk, treedef, shapes)
+    key = (system, where, chunk, shape, treedef, shapes)
     if key in _COMPILED:
         return _COMPILED[key], 0.0
     t0 = time.perf_counter()
-    compiled = fn.lower(sim, law, seed_arr, jnp.arange(chunk)).compile()
+    with using_loop_shape(shape):
+        compiled = fn.lower(sim, law, seed_arr, jnp.arange(chunk)).compile()
     compile_s = time.perf_counter() - t0
     if len(_COMPILED) >= 32:
         _COMPILED.pop(next(iter(_COMPILED)))
@@ -304,7 +309,7 @@ def _run_distributed(scenario, seed, todo, bounds, chunk, client, workers, finis
 
 
 @functools.lru_cache(maxsize=16)
-def _jitted_single(system: AbstractSystem):
+def _jitted_single(system: AbstractSystem, shape):  # one jit (and trace cache) per loop layout
     return jax.jit(system.simulate, static_argnames=("record",))
 
 
@@ -313,7 +318,9 @@ def simulate_one(scenario: Scenario, index: int = 0, seed: int | None = None, re
     system = get_system(scenario.kind)
     sim, law = build(scenario)
     seed = scenario.seed if seed is None else seed
-    out, trace = _jitted_single(system)(sim, law, run_key(seed, index), record=record)
+    shape = loop_shape()
+    with using_loop_shape(shape):
+        out, trace = _jitted_single(system, shape)(sim, law, run_key(seed, index), record=record)
     return jax.tree_util.tree_map(np.asarray, out), jax.tree_util.tree_map(np.asarray, trace)
 
 
@@ -328,13 +335,15 @@ def simulate_traces(
     system = get_system(scenario.kind)
     sim, law = build(scenario)
     seed = scenario.seed if seed is None else seed
-    fn = _batched_traces(system, every)
+    shape = loop_shape()
+    fn = _batched_traces(system, every, shape)
     indices = np.asarray(indices, dtype=int)
     outs, traces = [], []
     for start in range(0, len(indices), chunk_size):
         idx = indices[start : start + chunk_size]
         pad = np.pad(idx, (0, chunk_size - len(idx)), mode="edge")  # one compiled shape
-        o, tr = jax.tree_util.tree_map(np.asarray, fn(sim, law, seed, jnp.asarray(pad)))
+        with using_loop_shape(shape):
+            o, tr = jax.tree_util.tree_map(np.asarray, fn(sim, law, seed, jnp.asarray(pad)))
         outs.append({k: v[: len(idx)] for k, v in o._asdict().items()})
         traces.append({k: v[: len(idx)] for k, v in tr._asdict().items()})
     cat = lambda parts: {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}  # noqa: E731
@@ -342,7 +351,7 @@ def simulate_traces(
 
 
 @functools.lru_cache(maxsize=16)
-def _batched_traces(system: AbstractSystem, every: int):
+def _batched_traces(system: AbstractSystem, every: int, shape):
     def run(sim, law, seed, i):
         out, trace = system.simulate(sim, law, run_key(seed, i), record=True)
         return out, jax.tree_util.tree_map(lambda x: x[::every], trace)

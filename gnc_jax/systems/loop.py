@@ -15,6 +15,7 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 
+from .._numerics import loop_shape
 from .._status import Status, all_finite
 
 
@@ -90,7 +91,7 @@ def scan_in_blocks(step, carry, n: int, block: int, block_inputs):
     so it draws per image."""
 
     def run(carry, b, length=block):
-        return jax.lax.scan(step, carry, block_inputs(b, length))
+        return jax.lax.scan(step, carry, block_inputs(b, length), unroll=loop_shape().unroll)
 
     n_full, rest = divmod(n, block)
     traces = []

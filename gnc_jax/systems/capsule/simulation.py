@@ -24,6 +24,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from ..._numerics import loop_shape
 from ..._status import Status
 from ..._types import PRNGKeyArray, Scalar, Vector3
 from ...dynamics.atmosphere import Atmosphere
@@ -292,6 +293,7 @@ def _run(sim: CapsuleSimulation, law: AbstractEntryGuidance, key, draws: Capsule
             (c.truth, c.actuator, c.tally),
             None,
             length=sim.substeps,
+            unroll=loop_shape().unroll,
         )
         rec = _trace(draws.y0, c, nav, command, g, sim.earth) if record else None
         return LoopState(truth, c.estimate, g, actuator, tally), rec

@@ -8,7 +8,7 @@ import functools
 import jax
 import jax.numpy as jnp
 
-from ..._numerics import V3, as_array, as_v3, computed_once
+from ..._numerics import V3, as_array, as_v3, computed_once, loop_shape
 from ..._types import Array
 from ...dynamics.impactor import rk4, tilt_direction
 from ...navigation.ekf import NIS_BOUND_2DOF, NavEstimate
@@ -121,7 +121,9 @@ def image_step(
     # equal); the rest of the state stays in arrays, which the image step reads as vectors
     # and matrices (all of it as components measured slower overall).
     step = functools.partial(control_step, sim, law, draws.dispersion["accel_bias_mps2"], record)
-    inner, rec = jax.lax.scan(step, state._replace(truth=components(state.truth)), inputs)
+    inner, rec = jax.lax.scan(
+        step, state._replace(truth=components(state.truth)), inputs, unroll=loop_shape().unroll
+    )
     state = inner._replace(truth=arrays(inner.truth))
     return end_interval(sim, state, row), rec
 

@@ -1,0 +1,81 @@
+"""The accelerator's loop layout, run on the CPU: unfenced and unrolled closed loops give every
+system's per-run outcomes to its ``batch_tolerance`` (statuses and integers identical), so the
+layout a GPU compiles is checked where CI runs. The layout is chosen per platform; a caller may
+force one (``using_loop_shape``), and compiled programs are cached per layout."""
+
+import numpy as np
+import pytest
+
+import gnc_jax as gj
+from gnc_jax import montecarlo
+from gnc_jax._numerics import (
+    LoopShape,
+    computed_once,
+    for_platform,
+    loop_shape,
+    using_loop_shape,
+)
+
+ACCELERATOR = LoopShape(fence=False, unroll=4)
+
+
+def example(name):
+    system = gj.get_system(name)
+    return gj.load_scenario(system.example, overrides=dict(system.test_overrides))
+
+
+# The systems whose compiled loop the layout changes (fenced guidance steps, unrolled control
+# or truth sub-steps); the midcourse loop is one scan over navigation fixes, the same program
+# in both layouts.
+@pytest.mark.parametrize("name", ["impactor", "intercept", "capsule"])
+def test_accelerator_layout_on_cpu_matches_within_batch_tolerance(name):
+    assert name in gj.systems()
+    scenario = example(name)
+    cpu = gj.run_study(scenario, runs=3, seed=3, progress=False, n_devices=1)
+    with using_loop_shape(ACCELERATOR):
+        acc = gj.run_study(scenario, runs=3, seed=3, progress=False, n_devices=1)
+    assert acc.compile_s > 0.0, "the forced layout must compile its own program"
+    assert cpu.summary()["failed"] == 0, cpu.summary()["failed_by_status"]
+    rtol, atol = gj.get_system(name).batch_tolerance
+    for field, x in cpu.outcomes.items():
+        x, y = np.asarray(x), np.asarray(acc.outcomes[field])
+        if np.issubdtype(x.dtype, np.floating):
+            np.testing.assert_allclose(y, x, rtol=rtol, atol=atol, err_msg=field)
+        else:
+            np.testing.assert_array_equal(y, x, err_msg=field)
+
+
+def test_platform_defaults_and_override():
+    assert for_platform("cpu") == LoopShape(fence=True, unroll=1)
+    assert not for_platform("gpu").fence and for_platform("gpu").unroll > 1
+    assert loop_shape() == for_platform("cpu")  # CI's backend
+    with using_loop_shape(ACCELERATOR):
+        assert loop_shape() == ACCELERATOR
+    assert loop_shape() == for_platform("cpu")
+    with pytest.raises(ValueError, match="unroll"):
+        with using_loop_shape(LoopShape(unroll=0)):
+            pass
+
+
+def test_a_fence_is_a_conditional_only_when_the_layout_fences():
+    import jax
+    import jax.numpy as jnp
+
+    def f(t, x):
+        return computed_once(lambda y: jnp.sin(y) * 2.0, t, x)
+
+    text = str(jax.make_jaxpr(f)(1.0, jnp.ones(3)))
+    assert "cond" in text
+    with using_loop_shape(ACCELERATOR):
+        text = str(jax.make_jaxpr(f)(1.0, jnp.ones(3)))
+    assert "cond" not in text
+    np.testing.assert_allclose(f(1.0, jnp.ones(3)), np.sin(np.ones(3)) * 2.0, rtol=1e-15)
+
+
+def test_compiled_programs_are_cached_per_layout():
+    keys = [k for k in montecarlo._COMPILED if len(k) > 3]
+    shapes = {k[3] for k in keys}
+    if keys:  # after the parametrised test in this module: both layouts were cached apart
+        assert ACCELERATOR in shapes and for_platform("cpu") in shapes
+    else:
+        pytest.fail("the study test above should have compiled programs in this process")
