@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, PartitionSpec
 
-from ._random import run_key
+from ._random import DrawPlan, plan_key, run_key
 from .scenario import Scenario, ScenarioError
 from .systems.base import AbstractSystem, get_system
 
@@ -33,12 +33,15 @@ def build(scenario: Scenario):
 def batch_function(system: AbstractSystem, n_devices: int | None = None):
     """``f(sim, law, seed, indices) -> outcomes`` vmapped over run indices, sharded over devices.
 
+    ``seed``: the root seed, or a :class:`~gnc_jax._random.DrawPlan` that routes each error
+    source's draws (the error budget).
+
     ``indices`` must have a length divisible by the number of devices.
     """
     devices = jax.devices()[: n_devices or len(jax.devices())]
 
     def per_device(sim, law, seed, indices):
-        return jax.vmap(lambda i: system.simulate(sim, law, run_key(seed, i))[0])(indices)
+        return jax.vmap(lambda i: system.simulate(sim, law, plan_key(seed, i))[0])(indices)
 
     if len(devices) == 1:
         return jax.jit(per_device), 1
@@ -165,10 +168,10 @@ def _compile(system, fn, n_dev, sim, law, seed_arr, chunk):
     """Ahead-of-time compile (timed), reusing an executable compiled for the same structure.
 
     The cache key is everything the executable depends on: the system, the device count, the
-    chunk size and the tree structure (with static fields), shapes and dtypes of (sim, law).
+    chunk size and the tree structure (with static fields), shapes and dtypes of (sim, law, seed).
     Gains and scenario values are arguments, so a new value does not recompile.
     """
-    leaves, treedef = jax.tree_util.tree_flatten((sim, law))
+    leaves, treedef = jax.tree_util.tree_flatten((sim, law, seed_arr))
     key = (system, n_dev, chunk, treedef, tuple((jnp.shape(x), jnp.result_type(x)) for x in leaves))
     if key in _COMPILED:
         return _COMPILED[key], 0.0
@@ -186,7 +189,7 @@ def _run_local(scenario, system, seed, todo, chunk, n_devices, max_memory_fracti
     ``time.perf_counter()`` at which the runs started."""
     sim, law = build(scenario)
     fn, n_dev = batch_function(system, n_devices)
-    seed_arr = jnp.asarray(seed, dtype=jnp.uint32)
+    seed_arr = seed if isinstance(seed, DrawPlan) else jnp.asarray(seed, dtype=jnp.uint32)
     compiled, compile_s = _compile(system, fn, n_dev, sim, law, seed_arr, chunk)
     _check_memory(compiled, chunk, max_memory_fraction)
 

@@ -120,6 +120,7 @@ def run_study(
     overwrite: bool = False,
     client=None,
     workers: int | None = None,
+    draws=None,
 ) -> Study:
     """Run a Monte Carlo study of ``scenario``.
 
@@ -147,6 +148,9 @@ def run_study(
             worker compiles once per process; results come back to this process).
         workers: start a local Dask cluster of this many worker processes for the study
             (the cores are split between them).
+        draws: a :class:`~gnc_jax._random.DrawPlan` whose ``seed_a`` is ``seed``: route each
+            error source's draws between the runs of two seeds and scale them (the error
+            budget, :mod:`gnc_jax.budget`); in memory on this process only.
 
     A study estimated to take more than ``ANNOUNCE_S`` seconds prints its estimate to stderr
     and runs in chunks of about 10 s each so that the progress bar has an ETA. Per-run
@@ -159,6 +163,11 @@ def run_study(
         runs, seed, chunk_size, out, resume, overwrite, client, workers, max_hours,
         max_memory_fraction,
     )  # fmt: skip
+    if draws is not None and (out is not None or client is not None or workers is not None):
+        raise ScenarioError(
+            "draws: routed draws run in memory on this process; allowed: without out, client "
+            "or workers"
+        )
     system = get_system(scenario.kind)
     cost = _checked_cost(scenario, runs, n_devices, max_hours)
     if resume and chunk_size is None:
@@ -172,9 +181,10 @@ def run_study(
     n_chunks = -(-runs // chunk)
     bounds = [(c * chunk, min((c + 1) * chunk, runs)) for c in range(n_chunks)]
     store = _open_store(out, scenario, seed, runs, chunk, resume, overwrite)
+    keys = seed if draws is None else draws
     try:
         parts, compile_s, wall_s, n_workers = _run_chunks(
-            scenario, system, seed, runs, chunk, bounds, store, progress, announce, distributed,
+            scenario, system, keys, runs, chunk, bounds, store, progress, announce, distributed,
             n_devices, max_memory_fraction, client, workers,
         )  # fmt: skip
         return _finish(

@@ -7,10 +7,19 @@ Importing this package registers the built-in systems; :func:`register_system` a
 """
 
 from . import capsule, impactor, intercept, midcourse  # noqa: E402, F401, I001  (registrations)
-from .base import AbstractSystem, TraceRequest, get_system, register_system, systems, tunable_leaf
+from .base import (
+    AbstractSystem,
+    ErrorSource,
+    TraceRequest,
+    get_system,
+    register_system,
+    systems,
+    tunable_leaf,
+)
 
 __all__ = [
     "AbstractSystem",
+    "ErrorSource",
     "TraceRequest",
     "get_system",
     "register_system",
