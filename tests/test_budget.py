@@ -59,6 +59,9 @@ def test_linear_toy_shares_are_the_analytic_ones(toy):
     w0 = _draws(5, RUNS, 0)
     assert b.share("y", "s0", "one_at_a_time")["variance"] == pytest.approx(np.var(w0, ddof=1))
     assert b.checks["y"]["first_sum_le_1"] and b.checks["y"]["total_ge_first"]
+    # the all-on design is the study, run for run
+    study = gj.run_study(toy.toy_scenario(), runs=RUNS, seed=5)
+    assert b.checks["y"]["all_on_variance"] == np.var(study.outcomes["y"], ddof=1)
     assert b.nominal == {"status": 0, "identical_runs": True, "y": 0.0}
 
 

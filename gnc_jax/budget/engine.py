@@ -155,6 +155,9 @@ def budget(
     wall_s = time.perf_counter() - t0
     nominal = _nominal(system, scenario, runs, metrics, n, lay, seed)
     rows = _analyse(designs, linear, names, metrics, runs, (bootstrap, seed, level))
+    if isinstance(linear, tuple):
+        for i, name in enumerate(names):
+            designs[f"linear:{name}"] = (linear[0][:, i, :], linear[1])
     return Budget(
         scenario=scenario,
         runs=runs,
@@ -171,6 +174,7 @@ def budget(
         compile_s=compile_s,
         linear_s=linear_s if "linear" in methods else None,
         linear_error=linear if isinstance(linear, str) else None,
+        samples=designs,
     )
 
 

@@ -8,7 +8,10 @@ other source's from the first. Saltelli et al. (2010, Comput. Phys. Commun. 181,
 * first order ``S_i = mean(f_b (f_ab_i - f_a)) / V``,
 * total ``ST_i = mean((f_a - f_ab_i)^2) / (2 V)`` (Jansen's estimator),
 
-with ``V`` the variance of ``f_a`` and ``f_b`` pooled. The intervals are percentile bootstrap
+with ``V`` the variance of ``f_a`` and ``f_b`` pooled and ``f_b`` taken about their pooled
+mean (the estimator's expectation does not change, since ``E(f_ab_i - f_a) = 0``, but its
+variance no longer grows with the metric's mean: a Δv of 12 m/s that varies by 0.3 m/s gave
+first-order indices of +-1000 % on 48 runs uncentred). The intervals are percentile bootstrap
 intervals over the runs (a run's pair resampled together).
 """
 
@@ -22,6 +25,7 @@ def _indices(f_a, f_b, f_ab):
     """``(V, S, ST)``; the arrays' last axis is the run, ``f_ab``'s first the source."""
     pooled = np.concatenate([f_a, f_b], axis=-1)
     v = pooled.var(axis=-1, ddof=1)
+    f_b = f_b - pooled.mean(axis=-1, keepdims=True)
     with np.errstate(divide="ignore", invalid="ignore"):
         first = np.mean(f_b[..., None, :] * (f_ab - f_a[..., None, :]), axis=-1) / v[..., None]
         total = 0.5 * np.mean((f_a[..., None, :] - f_ab) ** 2, axis=-1) / v[..., None]

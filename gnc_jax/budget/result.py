@@ -17,7 +17,7 @@ METHOD_LABELS = {
     "one_at_a_time": "one at a time",
     "linear": "linear",
 }
-BUDGET_JSON, BUDGET_TABLE = "budget.json", "budget.parquet"
+BUDGET_JSON, BUDGET_TABLE, BUDGET_RUNS = "budget.json", "budget.parquet", "budget_runs.parquet"
 
 
 @dataclasses.dataclass
@@ -36,6 +36,9 @@ class Budget:
         nominal: the all-off run's metrics and status.
         wall_s, compile_s, linear_s: wall time of the whole budget, its compilation, and the
             linear method's share of it; linear_error: why the linear method could not run.
+        samples: ``{design: (metric x run values, ok per run)}``: ``all_on`` (the study),
+            ``b``, ``ab:<source>``, ``oat:<source>``, ``linear:<source>`` (the linearised
+            responses); written as ``budget_runs.parquet``.
     """
 
     scenario: Scenario
@@ -53,6 +56,7 @@ class Budget:
     compile_s: float
     linear_s: float | None = None
     linear_error: str | None = None
+    samples: dict | None = dataclasses.field(default=None, repr=False)
 
     def share(self, metric: str, source: str, method: str) -> dict:
         """The row of ``metric``, ``source`` and ``method``."""
@@ -63,6 +67,17 @@ class Budget:
 
     def table(self) -> pa.Table:
         return pa.Table.from_pylist(self.rows)
+
+    def runs_table(self) -> pa.Table:
+        """One row per design and run: ``design``, ``run``, ``ok`` and each metric."""
+        cols: dict = {"design": [], "run": [], "ok": [], **{m: [] for m in self.metrics}}
+        for design, (values, ok) in (self.samples or {}).items():
+            cols["design"] += [design] * len(ok)
+            cols["run"] += list(range(len(ok)))
+            cols["ok"] += [bool(x) for x in ok]
+            for j, m in enumerate(self.metrics):
+                cols[m] += [float(x) for x in values[j]]
+        return pa.table(cols)
 
     def to_dict(self) -> dict[str, Any]:
         return dict(
@@ -85,13 +100,15 @@ class Budget:
         )
 
     def save(self, out_dir) -> list[pathlib.Path]:
-        """``budget.json``, ``budget.parquet`` and ``scenario.toml`` in ``out_dir``."""
+        """``budget.json``, ``budget.parquet``, ``budget_runs.parquet`` and ``scenario.toml``
+        in ``out_dir``."""
         out = pathlib.Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         (out / BUDGET_JSON).write_text(json.dumps(self.to_dict(), indent=1, default=float))
         pq.write_table(self.table(), out / BUDGET_TABLE)
+        pq.write_table(self.runs_table(), out / BUDGET_RUNS)
         (out / "scenario.toml").write_text(self.scenario.to_toml())
-        return [out / BUDGET_JSON, out / BUDGET_TABLE, out / "scenario.toml"]
+        return [out / BUDGET_JSON, out / BUDGET_TABLE, out / BUDGET_RUNS, out / "scenario.toml"]
 
     def __str__(self) -> str:
         return format_table(self.to_dict())
@@ -104,7 +121,11 @@ def format_table(budget: dict) -> str:
     lines = []
     for metric in budget["metrics"]:
         c = budget["checks"].get(metric, {})
-        head = f"{metric}: variance {c.get('variance', c.get('all_on_variance', float('nan'))):.4g}"
+        variance = c.get("variance", c.get("all_on_variance", float("nan")))
+        if not variance > 0:
+            lines.append(f"{metric}: no variance (the same in every run): nothing to share")
+            continue
+        head = f"{metric}: variance {variance:.4g}"
         if "interaction" in c:
             head += (
                 f", first-order sum {c['first_sum']:.2f} [{c['first_sum_lo']:.2f}, "
