@@ -15,8 +15,10 @@ alone; see ``gnc_jax._config``); import it before anything runs a JAX computatio
 """
 
 from . import _config  # noqa: F401  (float64, host devices: must run before jax is used)
+from ._random import stream_key, stream_normal, stream_uniform
 from ._status import Status
 from ._version import __version__
+from .budget import Budget, budget
 from .montecarlo import CostEstimate, build, estimate_cost, run_key, simulate_one
 from .operating_envelope import Envelope, envelope
 from .report import report
@@ -24,7 +26,7 @@ from .reproduction import reproduce
 from .results import ResultsError, load_results
 from .scenario import Scenario, ScenarioError, list_scenarios, load_scenario
 from .study import Study, run_study
-from .systems import AbstractSystem, get_system, register_system, systems
+from .systems import AbstractSystem, ErrorSource, get_system, register_system, systems
 from .tuning import TuneResult, tune
 
 __all__ = [
@@ -33,6 +35,12 @@ __all__ = [
     "Envelope",
     "envelope",
     "Study",
+    "Budget",
+    "budget",
+    "ErrorSource",
+    "stream_key",
+    "stream_normal",
+    "stream_uniform",
     "build",
     "AbstractSystem",
     "get_system",

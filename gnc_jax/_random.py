@@ -3,12 +3,45 @@
 A run's key is split by an integer stream identifier per kind of draw (delivery error,
 knowledge error, images, control steps, ...), so adding a new kind of draw never changes the
 others, and a per-event stream (image ``i``) is folded once more by the event's index.
+
+Every draw of a simulation goes through :func:`normal` or :func:`uniform` of a key derived by
+:func:`stream_key` or :func:`fold_in`. Given a plain key they are ``jax.random``'s own
+functions. Given a :class:`DrawKey` (the error budget, :mod:`gnc_jax.budget`) they draw from
+two keys and route each error source's draws: from the first key or the second, scaled by a
+per-source factor (0 turns a source off, and the derivative with respect to the factor at 0 is
+the run's linearised response to that source's draws).
 """
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
-from ._types import Array, Float, PRNGKeyArray
+from ._types import Array, Bool, Float, PRNGKeyArray
+
+INDEX = "*"
+"""A traced fold-in (an event index) in a :class:`DrawKey` path."""
+
+
+class DrawKey(eqx.Module):
+    """Two run keys and the routing of each error source's draws between them.
+
+    Attributes:
+        a, b: the run keys (a: the study's run key; b: the paired run's).
+        from_b: per source, take its draws from ``b`` instead of ``a``.
+        scale: per source, the factor its standard draws are multiplied by (1: as drawn).
+        layout: static ``((path, spec), ...)``: a draw's path (the stream identifiers folded
+            in, :data:`INDEX` for a traced index) and its source: an int (the whole draw) or
+            ``((lo, hi, source), ...)`` slices of the draw's last axis.
+        path: the fold-ins applied so far.
+    """
+
+    a: PRNGKeyArray
+    b: PRNGKeyArray
+    from_b: Bool[Array, " sources"]
+    scale: Float[Array, " sources"]
+    layout: tuple = eqx.field(static=True)
+    path: tuple = eqx.field(static=True, default=())
 
 
 def run_key(seed: int, index) -> PRNGKeyArray:
@@ -17,15 +50,106 @@ def run_key(seed: int, index) -> PRNGKeyArray:
     return jax.random.fold_in(jax.random.key(jnp.asarray(seed, dtype=jnp.uint32)), index)
 
 
+class DrawPlan(eqx.Module):
+    """The routing of a whole study's draws: run ``i`` gets the :class:`DrawKey` of the
+    runs ``i`` of the studies of seeds ``seed_a`` and ``seed_b`` (:func:`plan_key`)."""
+
+    seed_a: Array
+    seed_b: Array
+    from_b: Bool[Array, " sources"]
+    scale: Float[Array, " sources"]
+    layout: tuple = eqx.field(static=True)
+
+    def key(self, index) -> DrawKey:
+        a, b = run_key(self.seed_a, index), run_key(self.seed_b, index)
+        return DrawKey(a, b, self.from_b, self.scale, self.layout)
+
+
+def plan_key(seed, index):
+    """Run ``index``'s key: :func:`run_key` of a root seed, or a :class:`DrawPlan`'s key."""
+    return seed.key(index) if isinstance(seed, DrawPlan) else run_key(seed, index)
+
+
+def fold_in(key, data, indexed: bool = False):
+    """``jax.random.fold_in`` of a plain key or of both keys of a :class:`DrawKey` (whose
+    path records ``data``, or :data:`INDEX` when it is traced or ``indexed``)."""
+    if not isinstance(key, DrawKey):
+        return jax.random.fold_in(key, data)
+    step = data if isinstance(data, int) and not indexed else INDEX
+    return DrawKey(
+        jax.random.fold_in(key.a, data),
+        jax.random.fold_in(key.b, data),
+        key.from_b,
+        key.scale,
+        key.layout,
+        key.path + (step,),
+    )
+
+
 def stream_key(key: PRNGKeyArray, stream: int, index=None) -> PRNGKeyArray:
     """The key of draw kind ``stream`` (and of its ``index``-th event when given)."""
-    k = jax.random.fold_in(key, stream)
-    return k if index is None else jax.random.fold_in(k, index)
+    k = fold_in(key, stream)
+    return k if index is None else fold_in(k, index, indexed=True)
+
+
+def _sources(key: DrawKey, shape) -> np.ndarray:
+    """The source index of each element of a draw of ``shape`` at ``key.path`` (static)."""
+    for path, spec in key.layout:
+        if tuple(path) == key.path:
+            if isinstance(spec, int):
+                return np.full(shape, spec)
+            out = np.full(shape[-1:], -1)
+            for lo, hi, source in spec:
+                out[lo:hi] = source
+            if (out < 0).any():
+                raise ValueError(f"draw {key.path}: elements {np.flatnonzero(out < 0)} undeclared")
+            return np.broadcast_to(out, shape)
+    raise ValueError(f"draw at stream path {key.path}: no declared error source")
+
+
+def _routed(key: DrawKey, draw, shape):
+    xa, xb = draw(key.a), draw(key.b)
+    src = _sources(key, xa.shape)
+    return jnp.where(key.from_b[src], xb, xa) * key.scale[src].astype(xa.dtype)
+
+
+def normal(key, shape=(), dtype=None) -> Float[Array, "..."]:
+    """Standard normal draws (``jax.random.normal``; routed for a :class:`DrawKey`)."""
+    kw = {} if dtype is None else {"dtype": dtype}
+    if not isinstance(key, DrawKey):
+        return jax.random.normal(key, shape, **kw)
+    return _routed(key, lambda k: jax.random.normal(k, shape, **kw), shape)
+
+
+def uniform(key, shape=(), minval=0.0, maxval=1.0) -> Float[Array, "..."]:
+    """Uniform draws (``jax.random.uniform``); for a :class:`DrawKey`, routed and scaled
+    about the interval's centre (0 for the symmetric intervals the simulations draw)."""
+    if not isinstance(key, DrawKey):
+        return jax.random.uniform(key, shape, minval=minval, maxval=maxval)
+    centre = 0.5 * (minval + maxval)
+    draw = lambda k: jax.random.uniform(k, shape, minval=minval, maxval=maxval) - centre  # noqa: E731
+    return centre + _routed(key, draw, shape)
 
 
 def stream_normal(key: PRNGKeyArray, stream: int, shape=(3,)) -> Float[Array, "..."]:
     """Standard normal draws of shape ``shape`` from stream ``stream`` of ``key``."""
-    return jax.random.normal(stream_key(key, stream), shape)
+    return normal(stream_key(key, stream), shape)
 
 
-__all__ = ["run_key", "stream_key", "stream_normal"]
+def stream_uniform(key, stream: int, shape=(), minval=0.0, maxval=1.0) -> Float[Array, "..."]:
+    """Uniform draws of shape ``shape`` from stream ``stream`` of ``key``."""
+    return uniform(stream_key(key, stream), shape, minval, maxval)
+
+
+__all__ = [
+    "DrawKey",
+    "DrawPlan",
+    "plan_key",
+    "fold_in",
+    "normal",
+    "run_key",
+    "stream_key",
+    "stream_normal",
+    "stream_uniform",
+    "uniform",
+]

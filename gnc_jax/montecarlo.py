@@ -24,7 +24,7 @@ import numpy as np
 from jax.sharding import Mesh, PartitionSpec
 
 from ._numerics import explicit_loop_shape, for_platform, loop_shape, using_loop_shape
-from ._random import run_key
+from ._random import DrawPlan, plan_key, run_key
 from .backend import Backend, placement, require, select
 from .planner import (
     LANES_FROM,
@@ -50,16 +50,18 @@ def build(scenario: Scenario):
 def batch_function(system: AbstractSystem, n_devices: int | None = None, devices=None):
     """``f(sim, law, seed, indices) -> outcomes`` vmapped over run indices, sharded over devices.
 
-    ``devices``: JAX's default devices unless given (another platform's, or the CPU's where
-    the default is a GPU: the program is then always placed on them through a mesh, even on
-    one device); ``indices`` must have a length divisible by the number of devices.
+    ``seed``: the root seed, or a :class:`~gnc_jax._random.DrawPlan` that routes each error
+    source's draws (the error budget). ``devices``: JAX's default devices unless given (another
+    platform's, or the CPU's where the default is a GPU: the program is then always placed on
+    them through a mesh, even on one device); ``indices`` must have a length divisible by the
+    number of devices.
     """
     placed = devices is not None
     devices = list(devices if placed else jax.devices())
     devices = devices[: n_devices or len(devices)]
 
     def per_device(sim, law, seed, indices):
-        return jax.vmap(lambda i: system.simulate(sim, law, run_key(seed, i))[0])(indices)
+        return jax.vmap(lambda i: system.simulate(sim, law, plan_key(seed, i))[0])(indices)
 
     if len(devices) == 1 and not placed:
         return jax.jit(per_device), 1
@@ -94,11 +96,11 @@ def _compile(system, fn, where, sim, law, seed_arr, chunk):
     (:func:`_where`: the devices and whether the program is placed on them), the chunk size,
     the loop layout (:class:`~gnc_jax._numerics.LoopShape`: the one set by the caller, else
     the devices' platform default) and the tree structure (with static fields), shapes and
-    dtypes of (sim, law). Gains and scenario values are arguments, so a new value does not
+    dtypes of (sim, law, seed). Gains and scenario values are arguments, so a new value does not
     recompile.
     """
     shape = explicit_loop_shape() or for_platform(where[0][0].platform)
-    leaves, treedef = jax.tree_util.tree_flatten((sim, law))
+    leaves, treedef = jax.tree_util.tree_flatten((sim, law, seed_arr))
     shapes = tuple((jnp.shape(x), jnp.result_type(x)) for x in leaves)
     key = (system, where, chunk, shape, treedef, shapes)
     if key in _COMPILED:
@@ -171,7 +173,7 @@ def _run_local(scenario, system, seed, todo, chunk, plan: LocalPlan):
         sim, law = build(scenario)
         fn, n_dev = batch_function(system, plan.n_devices, _placed_devices(plan.backend))
         devices = plan.backend.devices[:n_dev]
-        seed_arr = jnp.asarray(seed, dtype=jnp.uint32)
+        seed_arr = seed if isinstance(seed, DrawPlan) else jnp.asarray(seed, dtype=jnp.uint32)
         compiled, batch, compile_s = _fitting_batch(
             system, fn, devices, sim, law, seed_arr, chunk, plan.backend, plan
         )

@@ -7,6 +7,7 @@ systems never call the Monte Carlo layer.
 
 import pathlib
 
+from .budget.figures import BUDGET_JSON, budget_figures
 from .montecarlo import simulate_one, simulate_traces
 from .results import ResultsError, load_results
 
@@ -29,9 +30,12 @@ def report(run_dir, out_dir=None) -> list[str]:
     """Write the PNG figures of a study directory; returns their paths.
 
     Args:
-        run_dir: a directory written by ``gnc-jax run`` / :meth:`Study.save`.
+        run_dir: a directory written by ``gnc-jax run`` / :meth:`Study.save`, or by
+            ``gnc-jax budget`` / :meth:`Budget.save` (a bar chart per metric).
         out_dir: where to write the PNGs (default: ``run_dir``).
     """
+    if (pathlib.Path(run_dir) / BUDGET_JSON).is_file():
+        return [str(p) for p in budget_figures(run_dir, out_dir)]
     summary, runs, scenario = load_results(run_dir)
     out = pathlib.Path(out_dir or run_dir)
     try:

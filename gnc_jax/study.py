@@ -127,6 +127,7 @@ def run_study(
     client=None,
     workers: int | None = None,
     device: str | None = None,
+    draws=None,
 ) -> Study:
     """Run a Monte Carlo study of ``scenario``.
 
@@ -158,6 +159,9 @@ def run_study(
         device: ``"cpu"``, ``"gpu"`` or ``"auto"`` (default: JAX's default backend, a GPU
             where JAX finds one); a GPU asked for where there is none is refused
             (:mod:`gnc_jax.backend`). On a GPU a default chunk is as large as fits its memory.
+        draws: a :class:`~gnc_jax._random.DrawPlan` whose ``seed_a`` is ``seed``: route each
+            error source's draws between the runs of two seeds and scale them (the error
+            budget, :mod:`gnc_jax.budget`); in memory on this process only.
 
     A study estimated to take more than ``ANNOUNCE_S`` seconds prints its estimate to stderr
     and runs in chunks of about 10 s each so that the progress bar has an ETA. Per-run
@@ -172,6 +176,11 @@ def run_study(
     )  # fmt: skip
     if workers is not None:  # before anything is built: one line naming the extra
         require("dask.distributed", "workers")
+    if draws is not None and (out is not None or client is not None or workers is not None):
+        raise ScenarioError(
+            "draws: routed draws run in memory on this process; allowed: without out, client "
+            "or workers"
+        )
     system = get_system(scenario.kind)
     backend = select(device)
     cost = _checked_cost(scenario, runs, n_devices, max_hours, backend)
@@ -189,10 +198,11 @@ def run_study(
     n_chunks = -(-runs // chunk)
     bounds = [(c * chunk, min((c + 1) * chunk, runs)) for c in range(n_chunks)]
     store = _open_store(out, scenario, seed, runs, chunk, resume, overwrite)
+    keys = seed if draws is None else draws
     try:
         plan = LocalPlan(backend, n_devices, max_memory_fraction, fixed, None)
         parts, compile_s, wall_s, n_workers, write_s = _run_chunks(
-            scenario, system, seed, runs, chunk, bounds, store, progress, announce, distributed,
+            scenario, system, keys, runs, chunk, bounds, store, progress, announce, distributed,
             plan, client, workers, device,
         )  # fmt: skip
         return _finish(

@@ -1,4 +1,4 @@
-"""Command line: ``gnc-jax list | run | reproduce | envelope | report | tune``.
+"""Command line: ``gnc-jax list | run | reproduce | envelope | budget | report | tune``.
 
 Every command is one or two calls of the Python API (``gnc_jax.load_scenario``,
 ``gnc_jax.run_study``, ``Study.save``, ``gnc_jax.reproduce``, ``gnc_jax.report``). Bad input

@@ -189,6 +189,47 @@ def cmd_envelope(args) -> int:
     return 0
 
 
+def cmd_budget(args) -> int:
+    from ..budget import METHODS, budget
+    from ..scenario import load_scenario
+
+    scenario = load_scenario(args.scenario, overrides=args.set or ())
+    if args.out:
+        _writable_dir(args.out)
+    _print_warnings(scenario)
+    result = budget(
+        scenario,
+        runs=args.runs,
+        seed=args.seed,
+        metrics=args.metrics,
+        groups=True if args.groups else None,
+        methods=tuple(args.methods or METHODS),
+        max_hours=args.max_hours,
+        progress=False if args.no_progress else None,
+    )
+    print(
+        f"{scenario.name}: budget of {len(result.factors)} sources, {result.runs} runs per "
+        f"design, compile {result.compile_s:.1f} s, wall {result.wall_s:.1f} s"
+    )
+    if result.inactive:
+        print(f"  zero (left out): {', '.join(result.inactive)}")
+    if result.linear_error:
+        print(f"  linear method not available: {result.linear_error}")
+    print(result)
+    if args.out:
+        paths = result.save(args.out)
+        print("wrote " + ", ".join(str(p) for p in paths))
+    failed = 1.0 - result.counts["all_on_ok"] / result.runs
+    if failed > args.max_failed:
+        print(
+            f"gnc-jax: {failed:.1%} of the study's runs failed, more than --max-failed "
+            f"{args.max_failed:g} (the budget keeps the runs that are ok in every design)",
+            file=sys.stderr,
+        )
+        return EXIT_FAILED_RUNS
+    return 0
+
+
 def cmd_report(args) -> int:
     from ..report import report
 

@@ -11,9 +11,19 @@ from .arguments import (
     _study_limits,
     _where,
 )
-from .commands import cmd_envelope, cmd_list, cmd_report, cmd_reproduce, cmd_run, cmd_tune
+from .commands import (
+    cmd_budget,
+    cmd_envelope,
+    cmd_list,
+    cmd_report,
+    cmd_reproduce,
+    cmd_run,
+    cmd_tune,
+)
 
-DESCRIPTION = "Command line: ``gnc-jax list | run | reproduce | envelope | report | tune``."
+DESCRIPTION = (
+    "Command line: ``gnc-jax list | run | reproduce | envelope | budget | report | tune``."
+)
 """The parser's description: the first line of the package's docstring."""
 
 
@@ -24,6 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_run(sub)
     _add_reproduce(sub)
     _add_envelope(sub)
+    _add_budget(sub)
     _add_tune(sub)
     _add_report(sub)
     return p
@@ -117,6 +128,32 @@ def _add_envelope(sub) -> None:
     _where(q)
     _device(q)
     q.set_defaults(func=cmd_envelope)
+
+
+def _add_budget(sub) -> None:
+    q = sub.add_parser("budget", help="variance-based error budget: which source drives a metric")
+    q.add_argument("scenario", help="packaged scenario name (gnc-jax list) or a .toml path")
+    q.add_argument(
+        "--runs", type=_positive_int("--runs"), default=200, help="runs per design (default 200)"
+    )
+    q.add_argument("--seed", type=_seed, default=None, help="root seed (default: scenario's)")
+    q.add_argument(
+        "--metrics", nargs="+", default=None, help="metrics to decompose (default: the system's)"
+    )
+    q.add_argument(
+        "--methods",
+        nargs="+",
+        default=None,
+        help="any of sobol, oat, linear (default: all three)",
+    )
+    q.add_argument(
+        "--groups", action="store_true", help="take the system's source groups as one source each"
+    )
+    q.add_argument("--out", default=None, help="directory for budget.json and budget.parquet")
+    q.add_argument("--set", action="append", metavar="SECTION.FIELD=VALUE", help="override a field")
+    q.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _study_limits(q)
+    q.set_defaults(func=cmd_budget)
 
 
 def _add_tune(sub) -> None:

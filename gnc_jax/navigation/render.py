@@ -34,6 +34,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._random import normal
 from .._types import Array, Float, Matrix3, PRNGKeyArray, Scalar, Vector3
 
 
@@ -243,7 +244,7 @@ def digitise(camera: CameraModel, electrons, key: PRNGKeyArray | None) -> Float[
     if key is not None:
         # shot (Gaussian, variance = mean) + read noise: one normal draw of the summed variance
         var = jnp.maximum(e, 0.0) + camera.read_noise_e**2
-        e = e + jnp.sqrt(var) * jax.random.normal(key, e.shape)
+        e = e + jnp.sqrt(var) * normal(key, e.shape)
     e = jnp.minimum(e, camera.full_well_e)
     dn = jnp.round(e / camera.gain_e_per_dn + camera.bias_dn)
     return jnp.clip(dn, 0.0, camera.adc_max_dn)

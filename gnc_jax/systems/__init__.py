@@ -9,6 +9,7 @@ Importing this package registers the built-in systems; :func:`register_system` a
 from . import capsule, impactor, intercept, midcourse  # noqa: E402, F401, I001  (registrations)
 from .base import (
     AbstractSystem,
+    ErrorSource,
     StepCost,
     TraceRequest,
     get_system,
@@ -19,6 +20,7 @@ from .base import (
 
 __all__ = [
     "AbstractSystem",
+    "ErrorSource",
     "StepCost",
     "TraceRequest",
     "get_system",

@@ -55,6 +55,23 @@ class TraceRequest(NamedTuple):
     single: bool = False
 
 
+class ErrorSource(NamedTuple):
+    """One error source of a system, for the error budget (:mod:`gnc_jax.budget`).
+
+    Attributes:
+        fields: the scenario fields (``"errors.delivery_position_km"``) of its magnitudes; a
+            source whose fields are all zero draws nothing and is left out of a budget.
+        draws: the draws it owns, each ``(path,)`` (the whole draw) or ``(path, lo, hi)`` (a
+            slice of the draw's last axis); ``path``: the stream identifiers folded into the
+            run's key, :data:`gnc_jax._random.INDEX` for an event index (image ``i``).
+        doc: one line for the budget's tables.
+    """
+
+    fields: tuple[str, ...]
+    draws: tuple[tuple, ...]
+    doc: str = ""
+
+
 class StepCost(NamedTuple):
     """The cost model of one system on one platform: a study of ``runs`` runs of ``steps``
     steps each on ``d`` devices takes ``ceil(runs / d) x steps x run_step_s + steps x
@@ -115,6 +132,11 @@ class AbstractSystem(abc.ABC):
             per run), 1 (no padding) where lock-step waiting dominates.
         envelope_metrics: ``{summary key: label}`` mapped by ``gnc-jax envelope`` (one heat map
             each; ``failed_fraction`` is the fraction of failed runs).
+        error_sources: ``{name: ErrorSource}``: every random draw of a run belongs to exactly
+            one (the error budget routes them; a draw of none is an error there).
+        source_groups: ``{group: (source, ...)}`` that a budget may take as one source.
+        budget_metrics: ``{name: f(outcomes) -> array}`` that the budget decomposes
+            (``outcomes`` maps outcome fields to arrays, numpy or traced).
         batch_tolerance: ``(rtol, atol)`` to which a vmapped batch reproduces the per-run
             program on float outcomes (integer outcomes must be equal): both compute the same
             run, but XLA compiles the two programs separately and may round differently.
@@ -138,6 +160,9 @@ class AbstractSystem(abc.ABC):
     chunk_per_device: ClassVar[int | None] = None
     vector_lanes: ClassVar[int] = 1
     envelope_metrics: ClassVar[dict[str, str]] = {"failed_fraction": "failed fraction"}
+    error_sources: ClassVar[dict[str, ErrorSource]] = {}
+    source_groups: ClassVar[dict[str, tuple[str, ...]]] = {}
+    budget_metrics: ClassVar[dict[str, Any]] = {}
 
     # ---- cost ----
     def steps_per_run(self, config: dict) -> float | None:
@@ -377,6 +402,7 @@ def tunable_leaf(system: AbstractSystem, name: str):
 
 __all__ = [
     "AbstractSystem",
+    "ErrorSource",
     "register_system",
     "get_system",
     "systems",

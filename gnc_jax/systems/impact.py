@@ -74,3 +74,15 @@ IMPACT_LABELS = {
 def impact_objective(outcomes):
     """Miss (softened at 1 m) plus 10 s x Δv, averaged over the runs: differentiable."""
     return jnp.mean(jnp.sqrt(outcomes.miss_m**2 + 1.0)) + 10.0 * jnp.mean(outcomes.dv_mps)
+
+
+IMPACT_BUDGET_METRICS = {
+    "miss_m": lambda o: o["miss_m"],
+    "miss_t_m": lambda o: o["miss_t_m"],
+    "miss_r_m": lambda o: o["miss_r_m"],
+    "dv_mps": lambda o: o["dv_mps"],
+    "firings": lambda o: 1.0 * o["firings"],
+    "hit": lambda o: 1.0 * (o["silhouette_ratio"] <= 1.0),
+}
+"""What the error budget of an impact decomposes: the miss, its B-plane components, Δv,
+firings and the hit indicator (whose mean is the hit probability)."""

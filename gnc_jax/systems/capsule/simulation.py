@@ -25,6 +25,7 @@ import jax
 import jax.numpy as jnp
 
 from ..._numerics import loop_shape
+from ..._random import stream_normal, stream_uniform
 from ..._status import Status
 from ..._types import PRNGKeyArray, Scalar, Vector3
 from ...dynamics.atmosphere import Atmosphere
@@ -89,11 +90,15 @@ class CapsuleSimulation(eqx.Module):
         return self.dt_s * self.substeps
 
 
+# Streams of a capsule run: the nine entry, vehicle and atmosphere normals; the mass draw.
+_ENTRY, _MASS = range(2)
+
+
 def dispersed_entry(sim: CapsuleSimulation, key):
     """Dispersed entry state, truth vehicle and atmosphere, and the standard-normal draws."""
     d = sim.dispersions
-    z = jax.random.normal(jax.random.fold_in(key, 0), (9,))
-    u = jax.random.uniform(jax.random.fold_in(key, 1), (), minval=-1.0, maxval=1.0)
+    z = stream_normal(key, _ENTRY, (9,))
+    u = stream_uniform(key, _MASS, (), minval=-1.0, maxval=1.0)
     e = sim.entry
     r_e = sim.earth.equatorial_radius_m
     start = jnp.array(

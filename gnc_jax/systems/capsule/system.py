@@ -25,6 +25,7 @@ from .figures import capsule_figures
 from .params import PARAMETER_MODULES, Entry, GuidanceParams, SimulationParams, loop_counts
 from .reference import law_mission
 from .schema import check as check_config
+from .sources import BUDGET_METRICS, ERROR_SOURCES, SOURCE_GROUPS
 
 # Cost model of CapsuleSystem.steps_per_run: trajectory fractions of the paper scenario (the
 # law's predictions per corrector cycle: its family's prediction_steps).
@@ -98,6 +99,9 @@ def _capsule_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, A
 @register_system
 class CapsuleSystem(AbstractSystem):
     name = "capsule"
+    error_sources = ERROR_SOURCES
+    source_groups = SOURCE_GROUPS
+    budget_metrics = BUDGET_METRICS
     description = "lunar-return skip entry: predictor-corrector and reference tracking"
     parameter_modules = PARAMETER_MODULES
     law_family = AbstractEntryGuidance

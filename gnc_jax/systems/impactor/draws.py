@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 
 from ..._numerics import matmul, matvec3
-from ..._random import stream_key, stream_normal
+from ..._random import normal, stream_key, stream_normal
 from ..._types import Array, Float, PRNGKeyArray, Vector3
 from ...dynamics.impactor import ImpactorState
 from ...navigation.ekf import NavEstimate
@@ -65,7 +65,7 @@ def image_draws(key: PRNGKeyArray, i) -> Float[Array, "8"]:
     time. The per-run draws (delivery, knowledge, biases), which set the dispersion, stay
     float64.
     """
-    w = jax.random.normal(image_key(key, i), (IMAGE_DRAWS,), jnp.float32)
+    w = normal(image_key(key, i), (IMAGE_DRAWS,), jnp.float32)
     return w.astype(jnp.float64)
 
 

@@ -9,6 +9,7 @@ import jax
 import jax.numpy as jnp
 
 from ..._numerics import V3, as_array, as_v3, computed_once, loop_shape
+from ..._random import fold_in
 from ..._types import Array
 from ...dynamics.impactor import rk4, tilt_direction
 from ...navigation.ekf import NIS_BOUND_2DOF, NavEstimate
@@ -150,7 +151,7 @@ def begin_interval(
 
     w, attitudes = computed_once(draws_and_attitudes, t, estimate.r_hat)
     gain, meas = computed_once(
-        lambda *a: image_update(sim, *a, w[:2], jax.random.fold_in(image_key(key, i), 1)),
+        lambda *a: image_update(sim, *a, w[:2], fold_in(image_key(key, i), 1)),
         t,
         estimate.r_hat,
         estimate.v_hat,

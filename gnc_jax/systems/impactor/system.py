@@ -25,11 +25,18 @@ from ...navigation.measurements import AbstractMeasurement, measurement_class
 from ...navigation.render import choose_binning, phase_offset_tangent, render_frame, tangent_to_roi
 from ...plotting import ellipse_xy, pyplot, saver
 from ..base import H100_SOURCE, AbstractSystem, StepCost, TraceRequest, register_system
-from ..impact import IMPACT_LABELS, hit_statistics, impact_objective, impact_statistics
+from ..impact import (
+    IMPACT_BUDGET_METRICS,
+    IMPACT_LABELS,
+    hit_statistics,
+    impact_objective,
+    impact_statistics,
+)
 from . import build as impactor_build
 from . import schema as impactor_scenario
 from . import simulation as impactor_sim
 from .params import PARAMETER_MODULES, ImpactorParams, timeline
+from .sources import ERROR_SOURCES, SOURCE_GROUPS
 
 
 def _impactor_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
@@ -203,6 +210,9 @@ def _centroid_frames_figure(scenario, trace, out: pathlib.Path) -> pathlib.Path:
 @register_system
 class ImpactorSystem(AbstractSystem):
     name = "impactor"
+    error_sources = ERROR_SOURCES
+    source_groups = SOURCE_GROUPS
+    budget_metrics = IMPACT_BUDGET_METRICS
     description = "small-body impactor terminal guidance: optical navigation, EKF, engine"
     parameter_modules = PARAMETER_MODULES
     law_family = AbstractImpactorGuidance

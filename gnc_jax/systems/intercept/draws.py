@@ -14,10 +14,9 @@ threefry hash runs as a five-trip loop on CPU, whose fixed cost per call is then
 
 from typing import NamedTuple
 
-import jax
 import jax.numpy as jnp
 
-from ..._random import stream_key, stream_normal
+from ..._random import normal, stream_key, stream_normal
 from ..._types import Array, Float, PRNGKeyArray, Vector3
 from .state import PNSimulation
 
@@ -69,7 +68,7 @@ def block_draws(key: PRNGKeyArray, block, planar: bool) -> Float[Array, "rows bl
     """The normals of images ``block * DRAW_BLOCK + j``, j < DRAW_BLOCK: column j, rows as
     :func:`image_draws_of` reads them (single precision)."""
     shape = (draw_rows(planar), DRAW_BLOCK)
-    return jax.random.normal(stream_key(key, _IMAGES, block), shape, jnp.float32)
+    return normal(stream_key(key, _IMAGES, block), shape, jnp.float32)
 
 
 def image_draws_of(column: tuple, planar: bool) -> ImageDraws:

@@ -18,11 +18,18 @@ from ...guidance.intercept.apn import PNNavigation
 from ...guidance.intercept.base import AbstractInterceptGuidance
 from ...plotting import ellipse_xy, pyplot, saver
 from ..base import H100_SOURCE, AbstractSystem, StepCost, TraceRequest, register_system
-from ..impact import IMPACT_LABELS, hit_statistics, impact_objective, impact_statistics
+from ..impact import (
+    IMPACT_BUDGET_METRICS,
+    IMPACT_LABELS,
+    hit_statistics,
+    impact_objective,
+    impact_statistics,
+)
 from . import build as intercept_build
 from . import params as intercept_params
 from . import schema as intercept_scenario
 from . import simulation as intercept_sim
+from .sources import ERROR_SOURCES, SOURCE_GROUPS
 
 
 def _intercept_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
@@ -208,6 +215,9 @@ def intercept_steps(config: dict) -> float:
 @register_system
 class InterceptSystem(AbstractSystem):
     name = "intercept"
+    error_sources = ERROR_SOURCES
+    source_groups = SOURCE_GROUPS
+    budget_metrics = IMPACT_BUDGET_METRICS
     description = "deep-space intercept: augmented PN with Schmitt-triggered pulse firing"
     parameter_modules = intercept_params.PARAMETER_MODULES
     law_family = AbstractInterceptGuidance

@@ -29,7 +29,7 @@ import jax
 import jax.numpy as jnp
 
 from ..._numerics import safe_norm
-from ..._random import stream_normal
+from ..._random import normal, stream_key, stream_normal
 from ..._status import Status
 from ..._types import Array, Float, PRNGKeyArray, Scalar, State6, Vector3
 from ...dynamics.heliocentric import HeliocentricModel, propagate
@@ -190,8 +190,7 @@ def navigated_state(sim: MidcourseSimulation, key: PRNGKeyArray, i, x: State6) -
     scaled by ``final_fix_scale`` at the last fix."""
     err = sim.errors
     scale = jnp.where(i == sim.n_fixes - 1, err.final_fix_scale, 1.0)
-    k_nav = jax.random.fold_in(jax.random.fold_in(key, _NAVIGATION), i)
-    noise = jax.random.normal(k_nav, (6,))
+    noise = normal(stream_key(key, _NAVIGATION, i), (6,))
     nav_error = jnp.concatenate(
         [
             err.nav_position_bias_m + err.nav_position_m * noise[:3],
@@ -271,8 +270,8 @@ def _fix(
     t = sim.t_first_fix_s + i * sim.fix_interval_s
     nav = navigated_state(sim, key, i, state.truth)
     command, law_state = law.step(state.law, nav, t, ctx)
-    k_exec = jax.random.fold_in(jax.random.fold_in(key, _EXECUTION), i)
-    dv_exec = execute_burn(command.dv_mps, sim.errors, jax.random.normal(k_exec, (3,)))
+    noise = normal(stream_key(key, _EXECUTION, i), (3,))
+    dv_exec = execute_burn(command.dv_mps, sim.errors, noise)
     dv_norm = safe_norm(dv_exec)
     tally = state.tally
     is_first = command.burn & (tally.corrections == 0)

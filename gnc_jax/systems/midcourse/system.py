@@ -26,6 +26,7 @@ from . import params as midcourse_params
 from . import partials as midcourse_partials
 from . import schema as midcourse_scenario
 from . import simulation as midcourse_sim
+from .sources import BUDGET_METRICS, ERROR_SOURCES, SOURCE_GROUPS
 
 
 def _midcourse_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
@@ -251,6 +252,9 @@ def midcourse_steps(config: dict) -> float:
 @register_system
 class MidcourseSystem(AbstractSystem):
     name = "midcourse"
+    error_sources = ERROR_SOURCES
+    source_groups = SOURCE_GROUPS
+    budget_metrics = BUDGET_METRICS
     description = "interplanetary midcourse correction by autonomous B-plane targeting"
     parameter_modules = midcourse_params.PARAMETER_MODULES
     law_family = AbstractMidcourseGuidance

@@ -1,0 +1,173 @@
+"""The error budget (gnc_jax.budget) against closed forms: a toy system whose variance shares
+are known exactly (tests/budget_toy.py), the routing of each source's draws checked on the draws
+themselves, and the budget's own checks."""
+
+import json
+import os
+import pathlib
+import subprocess
+import sys
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import gnc_jax as gj
+from gnc_jax._random import DrawKey, normal, run_key, stream_key, stream_normal, uniform
+from gnc_jax.budget.plan import factors, layout
+from gnc_jax.systems import base
+
+RUNS = 4000
+
+
+@pytest.fixture(scope="module")
+def toy():
+    """The toy system, registered for this module only (the family tests do not see it)."""
+    import budget_toy
+
+    base.register_system(budget_toy.ToyBudgetSystem)
+    yield budget_toy
+    base._REGISTRY.pop("toy-budget", None)
+
+
+def _draws(seed, runs, source):
+    """Source ``source``'s standard normal of each run, drawn independently of the budget."""
+    return np.array([float(stream_normal(run_key(seed, i), source, ())) for i in range(runs)])
+
+
+# Twelve intervals are checked at once (3 sources x 4 methods): each at 1 - 0.05 / 12, so that
+# the test as a whole holds at 95 % (Bonferroni).
+LEVEL = 1 - 0.05 / 12
+
+
+def test_linear_toy_shares_are_the_analytic_ones(toy):
+    c = np.array([1.0, 2.0, 3.0])
+    b = gj.budget(toy.toy_scenario(), runs=RUNS, seed=5, bootstrap=400, level=LEVEL)
+    analytic = c**2 / np.sum(c**2)
+    for s, share in zip(("s0", "s1", "s2"), analytic):
+        for method in ("first_order", "total", "one_at_a_time", "linear"):
+            r = b.share("y", s, method)
+            assert r["share_lo"] <= share <= r["share_hi"], (s, method, r)
+    # the linear method is exact: its response to source s is c_s w_s run for run
+    for i, s in enumerate(("s0", "s1", "s2")):
+        w = _draws(5, RUNS, i)
+        assert b.share("y", s, "linear")["variance"] == pytest.approx(
+            c[i] ** 2 * np.mean(w**2), rel=1e-12
+        )
+    # one at a time: var(c_s w_s) of the study's own draws
+    w0 = _draws(5, RUNS, 0)
+    assert b.share("y", "s0", "one_at_a_time")["variance"] == pytest.approx(np.var(w0, ddof=1))
+    assert b.checks["y"]["first_sum_le_1"] and b.checks["y"]["total_ge_first"]
+    # the all-on design is the study, run for run
+    study = gj.run_study(toy.toy_scenario(), runs=RUNS, seed=5)
+    assert b.checks["y"]["all_on_variance"] == np.var(study.outcomes["y"], ddof=1)
+    assert b.nominal == {"status": 0, "identical_runs": True, "y": 0.0}
+
+
+def test_product_term_is_reported_as_an_interaction(toy):
+    # y = w0 + w1 w2: Var 2, S0 = 1/2, S1 = S2 = 0, ST1 = ST2 = 1/2, interactions 1/2
+    b = gj.budget(
+        toy.toy_scenario(c1=0.0, c2=0.0, p=1.0), runs=RUNS, seed=7, bootstrap=400, level=LEVEL
+    )
+    for s in ("s1", "s2"):
+        first, total = b.share("y", s, "first_order"), b.share("y", s, "total")
+        assert first["share_lo"] <= 0.0 <= first["share_hi"]
+        assert total["share_lo"] <= 0.5 <= total["share_hi"]
+        assert first["share_hi"] < total["share_lo"]
+        # the nominal run does not see the product: linear and one-at-a-time shares are zero
+        assert b.share("y", s, "linear")["share"] == 0.0
+        assert b.share("y", s, "one_at_a_time")["share"] == 0.0
+    c = b.checks["y"]
+    assert c["interaction_lo"] <= 0.5 <= c["interaction_hi"] and c["interaction_lo"] > 0.2
+
+
+def test_groups_and_inactive_sources(toy):
+    sc = toy.toy_scenario(c0=0.0)
+    facs, inactive = factors(sc.system, sc, groups=True)
+    assert facs == {"s12": ("s1", "s2")} and inactive == ["s0"]
+    b = gj.budget(sc, runs=64, seed=1, groups=True, methods=("sobol",), bootstrap=50)
+    # one factor carries all the variance: S = ST = 1 within sampling error
+    assert b.share("y", "s12", "first_order")["share"] == pytest.approx(1.0, abs=0.3)
+    assert b.share("y", "s12", "total")["share"] == pytest.approx(1.0, abs=0.3)
+
+
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (dict(runs=4), "runs: 4; allowed: an integer >= 8"),
+        (dict(metrics=["z"]), "metrics: 'z'; allowed: y"),
+        (dict(groups={"g": ("s9",)}), "groups.g: unknown source 's9'; allowed: s0, s1, s2"),
+        (dict(methods=("mc",)), "methods: 'mc'; allowed: sobol, oat, linear"),
+    ],
+)
+def test_bad_requests_are_refused_in_one_line(toy, call, message):
+    with pytest.raises(gj.ScenarioError) as e:
+        gj.budget(toy.toy_scenario(), **call)
+    assert str(e.value) == message
+
+
+def _impactor_key(from_b):
+    sc = gj.load_scenario("deep-impact-los")
+    facs, _ = factors(sc.system, sc)
+    lay = layout(sc.system, facs)
+    n = len(facs) + 1
+    pick = (
+        jnp.zeros(n, bool).at[list(facs).index(from_b)].set(True) if from_b else jnp.zeros(n, bool)
+    )
+    a, b = run_key(3, 17), run_key(4, 17)
+    return DrawKey(a, b, pick, jnp.ones(n), lay), a, b
+
+
+def test_pick_freeze_pair_shares_exactly_the_frozen_sources_draws():
+    from gnc_jax.systems.impactor import draws
+
+    key, a, b = _impactor_key("attitude_control")
+    img, img_a, img_b = (draws.image_draws(k, 9) for k in (key, a, b))
+    np.testing.assert_array_equal(img[2:5], img_b[2:5])  # camera pointing: from b
+    np.testing.assert_array_equal(img[:2], img_a[:2])  # centroiding, attitude noise: from a
+    np.testing.assert_array_equal(img[5:], img_a[5:])
+    burns, burns_a, burns_b = (draws.burn_draws(k) for k in (key, a, b))
+    np.testing.assert_array_equal(burns[:, 1:4], burns_b[:, 1:4])  # thrust pointing: from b
+    np.testing.assert_array_equal(burns[:, 5:8], burns_b[:, 5:8])
+    np.testing.assert_array_equal(burns[:, [0, 4]], burns_a[:, [0, 4]])
+    np.testing.assert_array_equal(burns[:, 8:], burns_a[:, 8:])
+    for stream in range(5):  # delivery, knowledge, biases: from a
+        np.testing.assert_array_equal(stream_normal(key, stream), stream_normal(a, stream))
+    # nothing routed: the study's draws, bit for bit
+    plain, _, _ = _impactor_key(None)
+    np.testing.assert_array_equal(draws.image_draws(plain, 9), img_a)
+    np.testing.assert_array_equal(draws.burn_draws(plain), burns_a)
+
+
+def test_routed_uniform_and_undeclared_draws():
+    lay = (((1,), 0),)
+    a, b = run_key(1, 2), run_key(2, 2)
+    key = DrawKey(a, b, jnp.array([True, False]), jnp.array([0.5, 1.0]), lay)
+    u = uniform(stream_key(key, 1), (4,), -1.0, 1.0)
+    np.testing.assert_allclose(u, 0.5 * jax.random.uniform(stream_key(b, 1), (4,), minval=-1.0))
+    with pytest.raises(ValueError, match=r"draw at stream path \(2,\): no declared error source"):
+        normal(stream_key(key, 2), (3,))
+
+
+def test_cli_budget_and_report(tmp_path):
+    """``gnc-jax budget`` on the toy system registered through the plugin variable, then
+    ``gnc-jax report`` of its directory: a figure per metric."""
+    tests_dir = pathlib.Path(__file__).parent
+    env = {**os.environ, "GNC_JAX_PLUGINS": "budget_toy", "GNC_JAX_HOST_DEVICES": "1"}
+    env["PYTHONPATH"] = os.pathsep.join([str(tests_dir), env.get("PYTHONPATH", "")])
+    out = tmp_path / "b"
+    cmd = [sys.executable, "-m", "gnc_jax", "budget", str(tests_dir / "toy_budget.toml")]
+    done = subprocess.run(
+        cmd + ["--runs", "64", "--out", str(out)], env=env, capture_output=True, text=True
+    )
+    assert done.returncode == 0, done.stderr
+    assert "first order" in done.stdout and "s2" in done.stdout
+    saved = json.loads((out / "budget.json").read_text())
+    assert saved["runs"] == 64 and set(saved["factors"]) == {"s0", "s1", "s2"}
+    assert (out / "budget.parquet").exists()
+    report = subprocess.run(
+        [sys.executable, "-m", "gnc_jax", "report", str(out)], env=env, capture_output=True
+    )
+    assert report.returncode == 0, report.stderr
+    assert (out / "budget_y.png").read_bytes()[:4] == b"\x89PNG"
