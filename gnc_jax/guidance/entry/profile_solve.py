@@ -11,9 +11,10 @@ less lift, shorter) by thousands of kilometres there (-5.3 deg, sigma_1 119.5 de
 45 deg, 2984 km at 135 deg). So this design fixes sigma_1 inside the window and solves for a
 constant second-entry bank sigma_2 in ``PROFILE_BOUNDS_RAD``:
 
-* sigma_1 is chosen on a ``FIRST_ENTRY_SCAN_STEP_RAD`` grid among the banks whose nominal, and
-  those of both neighbours, skip and land with every scanned second-entry bank and bracket
-  the target between the profile bounds; of those, the one whose estimated sigma_2 (linear
+* sigma_1 is chosen on a ``FIRST_ENTRY_SCAN_STEP_RAD`` grid among the banks whose nominal
+  skips and lands with every scanned second-entry bank and brackets the target between the
+  profile bounds: the one deepest inside the window (the first-entry corrector's margin
+  against a skip-out and a direct entry), then the one whose estimated sigma_2 (linear
   interpolation of the scanned chute ranges) is nearest 90 deg, the largest control margin
   (the seed's design criterion);
 * sigma_2 is the root of "chute on the target", a bounded regula-falsi solve.
@@ -64,19 +65,22 @@ def _solve_profile_bank(problem: NominalProblem, sigma_1, guess):
 
 def choose_first_entry_bank(err_m: np.ndarray, fate: np.ndarray) -> int | None:
     """Row of the scan (first-entry banks x ``PROFILE_SCAN_RAD``; chute range errors
-    ``err_m`` and fates ``fate``) to fix sigma_1 at, or None: rows that, with both neighbours,
-    skip and land at every scanned second-entry bank and whose errors change sign across the
-    row (decreasing in the bank); of those the one whose interpolated root is nearest 90 deg."""
+    ``err_m`` and fates ``fate``) to fix sigma_1 at, or None: of the rows that skip and land
+    at every scanned second-entry bank and whose errors change sign across the row (falling
+    with the bank), the one farthest (in rows) from a row that does not skip and land at
+    every scanned bank, the margin the first-entry corrector has against a skip-out or a
+    direct entry; ties to the one whose interpolated root is nearest 90 deg."""
     lands = (fate == SKIP_LANDS).all(axis=1)
-    steady = lands & np.roll(lands, 1) & np.roll(lands, -1)
-    steady[[0, -1]] = False
-    brackets = steady & (err_m[:, 0] >= 0.0) & (err_m[:, -1] <= 0.0)
+    brackets = lands & (err_m[:, 0] >= 0.0) & (err_m[:, -1] <= 0.0)
     if not brackets.any():
         return None
     rows = np.flatnonzero(brackets)
+    edges = np.flatnonzero(~lands)
+    edges = np.concatenate([[-1], edges, [lands.size]])
+    depth = np.min(np.abs(rows[:, None] - edges[None, :]), axis=1)
     # the errors fall with the bank: interpolate the root on the reversed (rising) sequence
     roots = np.array([np.interp(0.0, -err_m[i], PROFILE_SCAN_RAD) for i in rows])
-    return int(rows[np.argmin(np.abs(roots - math.pi / 2))])
+    return int(rows[np.lexsort((np.abs(roots - math.pi / 2), -depth))[0]])
 
 
 def solve_profile_design(problem: NominalProblem):
