@@ -37,6 +37,7 @@ from .nominal import (
     range_error_m,
     solve_first_entry_bank,
 )
+from .profile_solve import solve_profile_design
 from .reach import candidate_banks, candidate_flights, conditions
 
 # The fallback of a design whose solve did not converge (see design_with_fallback): at the
@@ -143,22 +144,48 @@ def fine_first_entry_guess(problem: NominalProblem, guess=SIGMA_1_GUESS_RAD):
 
 
 def design_with_fallback(problem: NominalProblem, entry: dict, vehicle: dict, **kwargs):
-    """:func:`design`, refused by :func:`require_design` if it did not converge; then, once,
-    the design again with the fine bracketing step ``SIGMA_1_FINE_STEP_RAD`` from
-    :func:`fine_first_entry_guess` (the overshoot boundary, where the banks that skip and land
-    are a window narrower than the coarse step), refused in turn if that fails too. A design
-    that converges at the coarse step is returned as it is."""
+    """:func:`design`; if it did not converge (:func:`require_design`), once more with the
+    fine bracketing step ``SIGMA_1_FINE_STEP_RAD`` from :func:`fine_first_entry_guess` (the
+    overshoot boundary, where the banks that skip and land are a window narrower than the
+    coarse step); if that fails too, the design that fixes the first-entry bank and meets the
+    range with a constant second-entry bank (:func:`design_by_profile`), refused in turn with
+    the reachable interval. A design that converges at the coarse step is returned as it is."""
     d = design(problem, **kwargs)
     try:
         require_design(problem, d, entry, vehicle)
         return d
     except ScenarioError:
         guess = fine_first_entry_guess(problem, kwargs.get("sigma_1_guess", SIGMA_1_GUESS_RAD))
-        if guess is None:
-            raise
-    d = design(problem, **dict(kwargs, sigma_1_guess=guess, sigma_1_step=SIGMA_1_FINE_STEP_RAD))
+    if guess is not None:
+        fine = dict(kwargs, sigma_1_guess=guess, sigma_1_step=SIGMA_1_FINE_STEP_RAD)
+        d = design(problem, **fine)
+        try:
+            require_design(problem, d, entry, vehicle)
+            return d
+        except ScenarioError:
+            pass
+    d = design_by_profile(problem, entry, vehicle)
     require_design(problem, d, entry, vehicle)
     return d
+
+
+def design_by_profile(problem: NominalProblem, entry: dict, vehicle: dict) -> DesignResult:
+    """The design of :mod:`gnc_jax.guidance.entry.profile_solve`: sigma_1 fixed inside the
+    window of banks that skip and land, the range met by a constant second-entry bank
+    (``sigma_a = sigma_b``). Refuses (:class:`ScenarioError`, naming ``entry.range_km``) a
+    target no first-entry bank brackets, with the chute ranges the design reaches."""
+    sigma_1, a, b = solve_profile_design(problem)
+    if sigma_1 is None:
+        reach = (
+            "no nominal of its scan skips and lands"
+            if math.isnan(a)
+            else f"{entry['range_km'] + a / 1e3:.0f} .. {entry['range_km'] + b / 1e3:.0f} km"
+        )
+        raise ScenarioError(
+            f"entry.range_km: {entry['range_km']:g} km; allowed: a range the reference design "
+            f"reaches with a skip ({reach}; {conditions(entry, vehicle)})"
+        )
+    return DesignResult(sigma_1, a, a, b, [])
 
 
 def require_design(problem: NominalProblem, d: "DesignResult", entry: dict, vehicle: dict):

@@ -1,0 +1,113 @@
+"""The reference design that meets the range with the second-entry bank, against brute force
+and against the nominal flights of a scan."""
+
+import math
+import re
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import gnc_jax as gj
+from gnc_jax.dynamics.entry import entry_state_from_conditions
+from gnc_jax.guidance.entry import design, nominal, profile_solve, reach
+from gnc_jax.guidance.entry.base import EntryModel
+from gnc_jax.systems.capsule import simulation as capsule_sim
+from gnc_jax.systems.capsule.params import capsule_params
+
+
+def _brute_force_row(err, fate):
+    n, m = err.shape
+    lands = [bool((fate[i] == nominal.SKIP_LANDS).all()) for i in range(n)]
+    best, best_key = None, None
+    for i in range(n):
+        if not lands[i] or not (err[i, 0] >= 0.0 >= err[i, -1]):
+            continue
+        depth = min(abs(i - j) for j in [-1, n] + [j for j in range(n) if not lands[j]])
+        for k in range(m - 1):  # the root of the piecewise-linear errors (falling)
+            if err[i, k] >= 0.0 >= err[i, k + 1]:
+                a, b = profile_solve.PROFILE_SCAN_RAD[k : k + 2]
+                w = err[i, k] / (err[i, k] - err[i, k + 1]) if err[i, k] != err[i, k + 1] else 0
+                key = (-depth, abs(a + w * (b - a) - math.pi / 2))
+                break
+        if best_key is None or key < best_key:
+            best, best_key = i, key
+    return best
+
+
+def test_the_first_entry_bank_choice_matches_brute_force():
+    rng = np.random.default_rng(3)
+    m = profile_solve.PROFILE_SCAN_RAD.size
+    for _ in range(200):
+        n = int(rng.integers(3, 12))
+        level = rng.normal(0.0, 2e6, size=(n, 1))
+        err = level - np.sort(rng.uniform(0, 4e6, size=(n, m)), axis=1)  # falling in sigma_2
+        err += np.linspace(1.5e6, 0.0, m)
+        fate = np.where(rng.random((n, m)) < 0.1, nominal.NEVER_LANDS, nominal.SKIP_LANDS)
+        assert profile_solve.choose_first_entry_bank(err, fate) == _brute_force_row(err, fate)
+
+
+def _problem(overrides) -> tuple[nominal.NominalProblem, dict]:
+    cfg = gj.load_scenario("lunar-skip-entry", overrides=overrides).config
+    p = capsule_params(cfg)
+    earth, vehicle, atmosphere, entry = capsule_sim.nominal_models(p)
+    problem = nominal.NominalProblem(
+        model=EntryModel(vehicle, earth, atmosphere),
+        entry=entry_state_from_conditions(entry, earth),
+        target_fixed=capsule_sim.target_direction(p, earth, entry),
+        kepler_load_g=jnp.asarray(cfg["guidance"]["skip_entry"]["kepler_load_g"]),
+        chute_altitude_m=p.entry.chute_altitude_m,
+        v_end_mps=jnp.asarray(p.reference.v_end_mps),
+    )
+    return problem, cfg
+
+
+@pytest.fixture(scope="module")
+def boundary():
+    """The packaged capsule at -5.3 deg (the overshoot boundary), 4000 km."""
+    return _problem(["entry.fpa_deg=-5.3", "entry.range_km=4000"])
+
+
+def test_the_profile_design_puts_the_chute_on_a_target_no_first_entry_bank_reaches(boundary):
+    problem, cfg = boundary
+    # with the design's initial profile (60 deg) no first-entry bank that skips and lands
+    # gets as short as 4000 km: the first-entry bank solve has no root there
+    banks = np.radians(np.arange(115.0, 122.0, 0.25))
+    a = nominal.PROFILE_INIT_RAD[0]
+    err, fate = (
+        np.asarray(x)[:, 0]
+        for x in reach.candidate_flights(problem, jnp.asarray(banks), jnp.asarray([a]))
+    )
+    assert (fate == nominal.SKIP_LANDS).any()
+    assert (err[fate == nominal.SKIP_LANDS] > 100e3).all()
+    d = design.design_by_profile(problem, cfg["entry"], cfg["vehicle"])
+    assert d.sigma_a == d.sigma_b
+    assert nominal.PROFILE_BOUNDS_RAD[0] < d.sigma_a < nominal.PROFILE_BOUNDS_RAD[1]
+    flight = nominal.fly_nominal(problem, d.sigma_1, d.sigma_a, d.sigma_b, d.v_switch)
+    assert int(nominal.fate_of(flight)) == nominal.SKIP_LANDS
+    assert abs(float(nominal.range_error_m(problem, flight))) < nominal.RANGE_TOLERANCE_M * 10
+    design.require_design(problem, d, cfg["entry"], cfg["vehicle"])  # does not refuse
+    # the chute range falls with the second-entry bank at the chosen first-entry bank, so the
+    # root is the only one: 5 deg either side lands beyond and short of the target
+    side = [
+        float(
+            nominal.range_error_m(
+                problem, nominal.fly_nominal(problem, d.sigma_1, s, s, d.v_switch)
+            )
+        )
+        for s in (d.sigma_a - math.radians(5.0), d.sigma_a + math.radians(5.0))
+    ]
+    assert side[0] > 0.0 > side[1]
+
+
+def test_a_target_beyond_every_skip_is_refused_with_the_reachable_interval(boundary):
+    problem, cfg = boundary
+    far = dict(cfg["entry"], range_km=15000.0)
+    problem = _problem(["entry.fpa_deg=-5.3", "entry.range_km=15000"])[0]
+    with pytest.raises(gj.ScenarioError) as e:
+        design.design_by_profile(problem, far, cfg["vehicle"])
+    text = str(e.value)
+    assert "\n" not in text and text.startswith("entry.range_km: 15000 km; allowed:")
+    lo, hi = (float(x) for x in re.search(r"\((\d+) \.\. (\d+) km;", text).groups())
+    # the interval holds the 4000 km target the same vehicle reaches (test above)
+    assert lo < 4000.0 < hi < 15000.0
