@@ -146,7 +146,7 @@ def _add_tune(sub) -> None:
         choices=("auto", "forward", "reverse"),
         default="auto",
         help="gradient mode of adam: forward (a tangent per gain), reverse (cost independent "
-        "of the number of gains) or auto (reverse from 8 gains on)",
+        "of the number of gains) or auto (reverse from 12 gains on)",
     )
     q.add_argument(
         "--learning-rate",

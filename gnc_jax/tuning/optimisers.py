@@ -11,11 +11,10 @@ corrector's prediction rounds in equinox's checkpointed ``while_loop`` (the same
 and arithmetic as its ``lax.while_loop``, bounded memory). ``"auto"`` (the default) takes
 reverse mode from :data:`REVERSE_FROM` parameters on. Measured with
 ``benchmarks/tune_gradient.py`` (256 runs, one step, compile apart, the shared 2-core machine
-at load 16-18, so each figure is inflated and noisy): deep-impact-los, value 0.29 s; forward
-mode 2.0 / 11.9 / 18.5 s for 2 / 16 / 32 parameters; reverse mode 4.0 to 20 s whatever the
-number (the same program: the spread is the load), peak RSS 2.1-2.3x the value's against
-1.4-1.5x for forward mode. Forward mode is cheaper for a law's few gains and reverse mode for
-schedules of tens of knots; the crossover lies between 2 and 16 parameters.
+at load 3-4): deep-impact-los, value 0.18-0.26 s; forward mode 1.1 / 7.7 s for 2 / 32
+parameters (about 0.66 s + 0.22 s per parameter); reverse mode 3.0 s whatever the number
+(17x a value), peak RSS 2.1x the value's against 1.4-1.5x for forward mode. The crossover is
+at about 11 parameters: forward mode for a law's few gains, reverse mode for schedules.
 
 **Gradient-free baseline** (``method="es"``): an antithetic evolution strategy in the same
 ``theta`` with the same optimiser, evaluated with the hard logic; each generation flies
@@ -34,7 +33,7 @@ import optax
 from .evaluation import _hard_objective
 from .problem import TuningProblem, heldout_indices, train_indices
 
-REVERSE_FROM = 8
+REVERSE_FROM = 12
 """``gradient="auto"`` takes reverse mode from this many tuned parameters on (the measured
 crossover: see the module docstring), forward mode below it."""
 
