@@ -1,16 +1,21 @@
-"""One tuning gradient step per system family: forward mode (``jax.jacfwd``, the tuner's
-default) against reverse mode (``jax.grad``) and the plain forward run, on one core.
+"""One tuning gradient step per system family: forward mode (``jax.jacfwd``) against reverse
+mode (``jax.grad``, through the system's :meth:`~gnc_jax.systems.AbstractSystem.reverse_mode`
+loops) and the plain run, for a number of tunable parameters, on one core.
 
-    python benchmarks/tune_gradient.py [--runs 256] [--only impactor,intercept,capsule]
-        [--short] [--modes value,forward,reverse]
+    python benchmarks/tune_gradient.py [--runs 256] [--only impactor,capsule]
+        [--short] [--modes value,forward,reverse] [--params 0,2,16,32]
 
 For each system with tunable gains, its example scenario (``--short``: with the system's
 ``test_overrides``) and all of its law's tunable gains: the relaxed objective of the tuner
 (``gnc_jax.tuning``, the system's smooth objective) over ``--runs`` runs, its value, its
-forward-mode gradient and its reverse-mode gradient. Each mode runs in its own process so that
+forward-mode gradient and its reverse-mode gradient. ``--params P``: the gradient with respect
+to ``P`` parameters, mapped into the law's gains (theta units) by a fixed random matrix
+``gains = theta_0 + A p`` (``A`` of shape gains x P, entries N(0, 1/P), seed 0): the cost of a
+gradient in ``P`` parameters whatever form they take (a schedule's knots), on the law's own
+closed loop (0: the gains themselves). Each (system, mode, P) runs in its own process so that
 the peak resident memory (``ru_maxrss``) is its own; compile time apart, best of 2 after the
 compilation, ``block_until_ready``; the compiled program's temp memory from
-``memory_analysis``. The capsule's flight is a ``while_loop``: reverse mode does not apply.
+``memory_analysis``. The plain run (``value``) is the baseline, printed as a ratio.
 """
 
 import argparse
@@ -22,10 +27,11 @@ import sys
 import time
 
 
-def measure(system_name, mode, runs, short):
+def measure(system_name, mode, runs, short, n_params):
     os.environ["GNC_JAX_HOST_DEVICES"] = "1"
     import jax
     import jax.numpy as jnp
+    import numpy as np
 
     import gnc_jax as gj
     from gnc_jax import tuning
@@ -42,12 +48,21 @@ def measure(system_name, mode, runs, short):
         tuning.parse_objective(None, scenario),
         0,
     )
-    theta = jnp.asarray(problem.param.theta([scenario[n] for n in params]))
+    theta0 = jnp.asarray(problem.param.theta([scenario[n] for n in params]))
     idx, valid = problem.padded(tuning.train_indices(0, runs, runs))
     temperature = problem.law_temperature
+    args = problem.args
+    if mode == "reverse":
+        args = (problem.system.reverse_mode(args[0]),) + args[1:]
+    if n_params:
+        a = np.random.default_rng(0).standard_normal((len(params), n_params)) / n_params**0.5
+        to_theta = lambda p: theta0 + jnp.asarray(a) @ p  # noqa: E731
+        theta = jnp.zeros(n_params)
+    else:
+        to_theta, theta = (lambda p: p), theta0
 
-    def f(th):
-        return problem.smooth(problem.args, th, temperature, idx, valid)
+    def f(p):
+        return problem.smooth(args, to_theta(p), temperature, idx, valid)
 
     fn = {"value": f, "forward": jax.jacfwd(f), "reverse": jax.grad(f)}[mode]
     t0 = time.perf_counter()
@@ -63,6 +78,7 @@ def measure(system_name, mode, runs, short):
         system=system_name,
         scenario=scenario.name + (" (short)" if short else ""),
         gains=len(params),
+        params=n_params or len(params),
         mode=mode,
         runs=runs,
         seconds=best,
@@ -75,38 +91,46 @@ def measure(system_name, mode, runs, short):
 def main():
     p = argparse.ArgumentParser()
     p.add_argument("--runs", type=int, default=256)
-    p.add_argument("--only", default="impactor,intercept,capsule")
+    p.add_argument("--only", default="impactor,capsule")
     p.add_argument("--modes", default="value,forward,reverse")
+    p.add_argument("--params", default="0", help="parameter counts (0: the law's gains)")
     p.add_argument("--short", action="store_true")
-    p.add_argument("--child", nargs=2, help=argparse.SUPPRESS)
+    p.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.child:
-        print(json.dumps(measure(*args.child, args.runs, args.short)))
+        name, mode, n = args.child
+        print(json.dumps(measure(name, mode, args.runs, args.short, int(n))))
         return
     rows = []
     for name in args.only.split(","):
         for mode in args.modes.split(","):
-            if name == "capsule" and mode == "reverse":
-                continue  # while_loop: not reverse-differentiable
-            cmd = [sys.executable, __file__, "--runs", str(args.runs), "--child", name, mode]
-            done = subprocess.run(
-                cmd + (["--short"] if args.short else []), capture_output=True, text=True
-            )
-            if done.returncode:
-                print(f"{name} {mode}: failed: {done.stderr.strip().splitlines()[-1]}")
-                continue
-            row = json.loads(done.stdout.strip().splitlines()[-1])
-            rows.append(row)
-            base = next(
-                (r["seconds"] for r in rows if r["system"] == name and r["mode"] == "value"), None
-            )
-            ratio = f" ({row['seconds'] / base:.1f}x value)" if base else ""
-            print(
-                f"{row['scenario']:<26} {row['gains']} gains {mode:<8} {row['runs']} runs: "
-                f"{row['seconds']:.3g} s{ratio}, compile {row['compile_s']:.0f} s, temp "
-                f"{row['temp_mb']:.1f} MB, peak RSS {row['peak_rss_mb']:.0f} MB",
-                flush=True,
-            )
+            for n in [0] if mode == "value" else [int(x) for x in args.params.split(",")]:
+                row = _child(name, mode, n, args)
+                if row is None:
+                    continue
+                rows.append(row)
+                base = next((r for r in rows if r["system"] == name and r["mode"] == "value"), None)
+                ratio = (
+                    f" ({row['seconds'] / base['seconds']:.1f}x value time, "
+                    f"{row['peak_rss_mb'] / base['peak_rss_mb']:.1f}x value peak RSS)"
+                    if base
+                    else ""
+                )
+                print(
+                    f"{row['scenario']:<26} {row['params']:>2} params {mode:<8} {row['runs']} "
+                    f"runs: {row['seconds']:.3g} s{ratio}, compile {row['compile_s']:.0f} s, "
+                    f"temp {row['temp_mb']:.1f} MB, peak RSS {row['peak_rss_mb']:.0f} MB",
+                    flush=True,
+                )
+
+
+def _child(name, mode, n, args):
+    cmd = [sys.executable, __file__, "--runs", str(args.runs), "--child", name, mode, str(n)]
+    done = subprocess.run(cmd + (["--short"] if args.short else []), capture_output=True, text=True)
+    if done.returncode:
+        print(f"{name} {mode} {n}: failed: {done.stderr.strip().splitlines()[-1]}")
+        return None
+    return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 if __name__ == "__main__":

@@ -279,3 +279,26 @@ def test_built_in_terms_match_numpy_and_their_relaxations_tend_to_them():
     np.testing.assert_allclose(float(objective.value(out, w)), total, rtol=1e-12)
     smooth = [abs(float(objective.value(out, w, t)) - total) for t in (1e-1, 1e-2, 1e-4)]
     assert smooth[0] > smooth[1] > smooth[2] and smooth[2] < 1e-2
+
+
+def test_auto_gradient_mode_follows_the_number_of_parameters(monkeypatch):
+    """``gradient="auto"`` runs forward mode below ``REVERSE_FROM`` parameters and reverse
+    mode from it on; both give the steps the named mode gives (the same gradient)."""
+    from gnc_jax.tuning import optimisers
+
+    assert optimisers.gradient_mode("auto", optimisers.REVERSE_FROM - 1) == "forward"
+    assert optimisers.gradient_mode("auto", optimisers.REVERSE_FROM) == "reverse"
+    assert optimisers.gradient_mode("forward", 100) == "forward"
+    kw = dict(batch=6, steps=3, heldout_runs=0, learning_rate=0.2, check_runs=0, seed=2)
+    fwd = tune(toy(), "guidance.pn.n", "miss_rms", gradient="forward", **kw)
+    rev = tune(toy(), "guidance.pn.n", "miss_rms", gradient="reverse", **kw)
+    auto = tune(toy(), "guidance.pn.n", "miss_rms", **kw)
+    assert [h["gains"] for h in auto.history] == [h["gains"] for h in fwd.history]
+    monkeypatch.setattr(optimisers, "REVERSE_FROM", 1)
+    auto_rev = tune(toy(), "guidance.pn.n", "miss_rms", **kw)
+    assert [h["gains"] for h in auto_rev.history] == [h["gains"] for h in rev.history]
+    np.testing.assert_allclose(
+        [h["gains"] for h in rev.history], [h["gains"] for h in fwd.history], rtol=1e-9
+    )
+    with pytest.raises(ScenarioError, match="gradient"):
+        tune(toy(), "guidance.pn.n", gradient="sideways", **kw)

@@ -254,6 +254,7 @@ def cmd_tune(args) -> int:
         steps=args.steps,
         seed=args.seed,
         method=args.method,
+        gradient=args.mode,
         learning_rate=args.learning_rate,
         heldout_runs=args.heldout,
         eval_every=args.eval_every,

@@ -182,6 +182,13 @@ def _add_tune(sub) -> None:
         "--method", choices=("adam", "es"), default="adam", help="adam (gradients) or es"
     )
     q.add_argument(
+        "--mode",
+        choices=("auto", "forward", "reverse"),
+        default="auto",
+        help="gradient mode of adam: forward (a tangent per gain), reverse (cost independent "
+        "of the number of gains) or auto (reverse from 12 gains on)",
+    )
+    q.add_argument(
         "--learning-rate",
         type=_number("--learning-rate", float, lambda v: 0 < v < float("inf"), "a number > 0"),
         default=0.1,

@@ -285,6 +285,13 @@ class AbstractSystem(abc.ABC):
     def simulate(self, params, law, key, record: bool = False):
         """One run: ``(outcome, trace)``; ``trace`` is ``None`` unless ``record``."""
 
+    def reverse_mode(self, params):
+        """``params`` set up to be differentiated in reverse mode (``jax.grad``): the same
+        outcomes, from loops that reverse mode can cross with bounded memory (a system whose
+        loops are ``lax.while_loop`` swaps them for checkpointed ones). Default: ``params``
+        (scans, each of whose steps the simulator checkpoints itself)."""
+        return params
+
     # ---- results ----
     def statistics(self, outcomes: dict, ok) -> dict[str, Any]:
         """Summary statistics over the ``ok`` runs (``{}`` when there are none)."""

@@ -2,26 +2,19 @@
 antithetic evolution strategy on the hard logic (:func:`_run_es`), with their schedule,
 temperatures, hard-logic checks and progress records.
 
-**Forward mode, chosen by measurement.** The gradient is ``jax.jacfwd`` (one forward tangent
-per gain, vectorised) by default; ``gradient="reverse"`` is ``jax.grad``. Measured with
-``benchmarks/tune_gradient.py`` (one core of the shared 2-core machine, full paper scenarios,
-the relaxed objective; value / forward / reverse, compiled temp memory):
-
-* deep-impact-los, 16 runs, 2 gains: 0.11 s / 0.23 s (2.1x) / 4.3 s (39x); temp memory
-  0 / 0.1 MB / 273 MB; compile 15 / 32 / 155 s;
-* bennu-apn, 8 runs, 4 gains: 0.81 s / 14.3 s (18x) / 15.1 s (19x); 0 / 0.1 MB / 2.8 GB;
-  compile 19 / 40 / 84 s (one gain, forward: 9.5 s against 1.14 s, 8x).
-
-Reverse mode keeps the residuals of every step of the closed loop (17 MB per LOS run over
-7200 steps, 350 MB per intercept run over 91 800 steps with an EKF update each): 256 intercept
-runs would need 90 GB. A ``jax.checkpoint`` of the whole run does not bound the residuals of
-the scans inside it, and checkpointing the simulators' own scans would change every simulator;
-the capsule's flight (a ``while_loop``) is not reverse-differentiable at all. Forward mode needs
-no memory beyond the forward run whatever the loop's length, and with the few gains a law has
-it is also the faster (LOS: 19x faster than reverse; intercept: equal). Its cost per gain
-depends on the loop: 0.6 of a run per gain for the LOS law (the EKF runs once per 15 s image),
-but 4 to 7 runs per gain for the intercept, whose EKF update at every 1 s step differentiates
-its matrix algebra once per tangent.
+**Forward or reverse mode, by the number of parameters.** ``gradient="forward"`` is
+``jax.jacfwd`` (one tangent per parameter, vectorised), ``"reverse"`` is ``jax.grad`` through
+the loops the system sets up for it (:meth:`~gnc_jax.systems.AbstractSystem.reverse_mode`):
+the impactor checkpoints each image step of its scan (one loop state kept per image, an
+image's control steps recomputed on the way back); the capsule flies its cycles and its
+corrector's prediction rounds in equinox's checkpointed ``while_loop`` (the same trip counts
+and arithmetic as its ``lax.while_loop``, bounded memory). ``"auto"`` (the default) takes
+reverse mode from :data:`REVERSE_FROM` parameters on. Measured with
+``benchmarks/tune_gradient.py`` (256 runs, one step, compile apart, the shared 2-core machine
+at load 3-4): deep-impact-los, value 0.18-0.26 s; forward mode 1.1 / 7.7 s for 2 / 32
+parameters (about 0.66 s + 0.22 s per parameter); reverse mode 3.0 s whatever the number
+(17x a value), peak RSS 2.1x the value's against 1.4-1.5x for forward mode. The crossover is
+at about 11 parameters: forward mode for a law's few gains, reverse mode for schedules.
 
 **Gradient-free baseline** (``method="es"``): an antithetic evolution strategy in the same
 ``theta`` with the same optimiser, evaluated with the hard logic; each generation flies
@@ -39,6 +32,18 @@ import optax
 
 from .evaluation import _hard_objective
 from .problem import TuningProblem, heldout_indices, train_indices
+
+REVERSE_FROM = 12
+"""``gradient="auto"`` takes reverse mode from this many tuned parameters on (the measured
+crossover: see the module docstring), forward mode below it."""
+
+
+def gradient_mode(gradient: str, n_params: int) -> str:
+    """``"forward"`` or ``"reverse"``: ``gradient`` itself, or for ``"auto"`` the cheaper by
+    the number of tuned parameters (:data:`REVERSE_FROM`)."""
+    if gradient != "auto":
+        return gradient
+    return "reverse" if n_params >= REVERSE_FROM else "forward"
 
 
 def _schedule(learning_rate, steps):
@@ -95,8 +100,9 @@ def _run_adam(
 
     t_arg = lambda s: None if temps[s] is None else np.float64(temps[s])  # noqa: E731
     idx, valid = problem.padded(train_indices(0, batch, train_runs))
+    args = problem.args_for(gradient)
     step_fn, compile_s = problem.compiled(
-        f"adam-{gradient}", build_step, problem.args, theta, t_arg(0), idx, valid
+        f"adam-{gradient}", build_step, args, theta, t_arg(0), idx, valid
     )
     update = _compiled_update(opt)
     state = opt.init(jnp.asarray(theta))
@@ -104,7 +110,7 @@ def _run_adam(
     for s in range(steps):
         idx, valid = problem.padded(train_indices(s, batch, train_runs))
         t0 = time.perf_counter()
-        value, grad = step_fn(problem.args, theta, t_arg(s), idx, valid)
+        value, grad = step_fn(args, theta, t_arg(s), idx, valid)
         rec = _record(problem, s, value, theta, temps[s], (s + 1) * batch, 0.0)
         theta, state = update(np.asarray(grad), state, theta)
         theta = np.asarray(theta)

@@ -76,6 +76,13 @@ class TuningProblem:
         """The dynamic arguments of every jitted function: built scenario, law, seed, weights."""
         return self.sim, self.law, self.seed_arr, self.term_weights
 
+    def args_for(self, gradient: str):
+        """:attr:`args`, with the built scenario set up by the system for reverse mode when
+        ``gradient == "reverse"`` (:meth:`~gnc_jax.systems.AbstractSystem.reverse_mode`)."""
+        if gradient != "reverse":
+            return self.args
+        return (self.system.reverse_mode(self.sim),) + self.args[1:]
+
     def jitted(self, kind: str, build_fn):
         key = (
             kind, self.system, self.objective.structure, self.param, self.gains, self.n_dev,

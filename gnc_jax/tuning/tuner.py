@@ -11,7 +11,7 @@ from ..backend import placement, select
 from ..scenario import Scenario, ScenarioError, load_scenario
 from .evaluation import _hard_objective, evaluate_heldout
 from .objectives import parse_objective
-from .optimisers import _run_adam, _run_es, _temperatures, default_optimizer
+from .optimisers import _run_adam, _run_es, _temperatures, default_optimizer, gradient_mode
 from .parametrisation import resolve_gains
 from .problem import HELDOUT_OFFSET, TuningProblem
 from .result import TuneResult
@@ -33,7 +33,7 @@ def tune(
     heldout_runs: int = 1000,
     eval_every: int = 0,
     eval_runs: int = 256,
-    gradient: str = "forward",
+    gradient: str = "auto",
     population: int = 4,
     sigma: float = 0.1,
     confidence: float = 0.95,
@@ -67,7 +67,10 @@ def tune(
         heldout_runs: held-out runs of the final paired evaluation (0: none).
         eval_every, eval_runs: evaluate the hard held-out objective on ``eval_runs`` held-out
             runs every ``eval_every`` steps (0: never) for :meth:`TuneResult.runs_to_reach`.
-        gradient: ``"forward"`` (``jax.jacfwd``) or ``"reverse"`` (``jax.grad``).
+        gradient: ``"forward"`` (``jax.jacfwd``: a tangent per parameter), ``"reverse"``
+            (``jax.grad`` through the system's checkpointed loops: a cost that does not grow
+            with the parameters) or ``"auto"``: reverse from
+            :data:`~gnc_jax.tuning.optimisers.REVERSE_FROM` parameters on, else forward.
         population, sigma: antithetic pairs per generation and the perturbation in theta
             (``method="es"``).
         check_runs, check_every: every ``check_every`` steps (default: an eighth of the
@@ -109,6 +112,7 @@ def tune(
             check_every=max(steps // 8, 1) if check_every is None else check_every,
             check_indices=check_indices,
         )
+        gradient = gradient_mode(gradient, len(names))
         history, theta, compile_s, wall_s = run(
             problem, theta0, opt, temps, batch, steps, train_runs, gradient, population, sigma,
             monitor, callback, seed,
@@ -151,8 +155,8 @@ def _checked_sizes(
         raise ScenarioError(f"seed: {seed!r}; allowed: an integer in [0, 2^32)")
     if method not in ("adam", "es"):
         raise ScenarioError(f"method: {method!r}; allowed: adam, es")
-    if gradient not in ("forward", "reverse"):
-        raise ScenarioError(f"gradient: {gradient!r}; allowed: forward, reverse")
+    if gradient not in ("auto", "forward", "reverse"):
+        raise ScenarioError(f"gradient: {gradient!r}; allowed: auto, forward, reverse")
     train_runs = batch * steps if train_runs is None else train_runs
     if not 1 <= train_runs <= HELDOUT_OFFSET:
         raise ScenarioError(

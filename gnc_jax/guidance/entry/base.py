@@ -114,6 +114,9 @@ class EntryGuidanceContext(eqx.Module):
             flag it knows for every run at once, so that under ``vmap`` the corrector stays a
             ``lax.cond`` instead of running, masked, at every step); ``None``: the law counts
             its own steps (``step % pc_every == 0``), the same schedule.
+        loop_kind: ``"lax"``: the corrector's rounds are a ``lax.while_loop`` (evaluation,
+            forward mode); ``"checkpointed"``: equinox's checkpointed ``while_loop`` (the same
+            rounds and arithmetic, reverse-mode differentiable with bounded memory).
     """
 
     model: EntryModel
@@ -122,6 +125,7 @@ class EntryGuidanceContext(eqx.Module):
     ratio_filter_gain: Scalar
     pc_every: int = eqx.field(static=True, default=4)
     cycle_start: Array | None = None
+    loop_kind: str = eqx.field(static=True, default="lax")
 
 
 class EntryGuidanceLog(NamedTuple):

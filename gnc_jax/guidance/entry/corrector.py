@@ -5,6 +5,7 @@ Each function takes the law (:class:`~gnc_jax.guidance.entry.skip_entry.SkipEntr
 its bounds, tolerance and loop sizes.
 """
 
+import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
 
@@ -25,6 +26,8 @@ from .state import SkipEntryState
 # average; at 16 s steps a 256-run chunk's corrector time is least at 8 (16: the same, 4: 7 %
 # more).
 ROUND_STEPS = 8
+# Round carries reverse mode keeps per corrector cycle (loop_kind "checkpointed")
+CHECKPOINTS = 16
 
 
 def _where(pick, new, old):
@@ -58,6 +61,7 @@ def corrector_cycle(law, state: SkipEntryState, y, t, speed, ctx, model, pulled,
             active,
             state.corrector_slope,
             state.dip_altitude_m,
+            ctx.loop_kind,
         )
         return res._replace(slope=jnp.asarray(res.slope, dtype=float))
 
@@ -95,6 +99,7 @@ def correct(
     enabled,
     slope=None,
     dip_altitude_m=None,
+    loop_kind="lax",
 ):
     """Bounded regula falsi on sigma_0 (seed 003 eqs. 11-15), at most
     1 + n_bracket + n_iter predictions.
@@ -112,7 +117,13 @@ def correct(
     starts the prediction it proposes next. Under ``vmap`` the loop runs until the run
     with the most predictor steps in the cycle is done; with a loop per prediction slot
     instead, every slot runs as long as its slowest run, which at 16 s steps costs a
-    256-run chunk's corrector 7 % more. The solve is the same either way."""
+    256-run chunk's corrector 7 % more. The solve is the same either way.
+
+    ``loop_kind`` (static) ``"checkpointed"``: the rounds are equinox's checkpointed
+    ``while_loop`` (bounded by the most rounds a solve can take, so never cut short) and a
+    round's steps a masked ``lax.scan`` of ``ROUND_STEPS`` (the arithmetic of the vmapped
+    ``while_loop``, whose body runs for every run and keeps the finished ones' state):
+    reverse-mode differentiable, ``CHECKPOINTS`` round carries kept."""
 
     secant = law.corrector_start == "secant"
     solver = regula_falsi(
@@ -135,6 +146,13 @@ def correct(
 
     def steps(c, sigma_0):
         """Up to ROUND_STEPS steps of the prediction."""
+        if loop_kind == "checkpointed":
+
+            def masked(c, _):
+                new = predictor_step(law, c, sigma_0, origin.speed_mps, model)
+                return _where(integrating(law, c), new, c), None
+
+            return jax.lax.scan(masked, c, None, length=ROUND_STEPS)[0]
         c, _ = jax.lax.while_loop(
             lambda cj: integrating(law, cj[0]) & (cj[1] < ROUND_STEPS),
             lambda cj: (
@@ -156,5 +174,17 @@ def correct(
         return s, jnp.where(end, x_next, x), _where(end, c_next, c)
 
     c = predictor_start(law, origin, x, active, model)
-    s, _, _ = jax.lax.while_loop(lambda sxc: ~solver.done(sxc[0]), round_, (s, x, c))
+    if loop_kind == "checkpointed":
+        # each prediction ends within ceil(max_steps / ROUND_STEPS) rounds
+        most = solver.n_evals_total * -(-law.predictor_max_steps // ROUND_STEPS)
+        s, _, _ = eqxi.while_loop(
+            lambda sxc: ~solver.done(sxc[0]),
+            round_,
+            (s, x, c),
+            max_steps=most,
+            kind="checkpointed",
+            checkpoints=CHECKPOINTS,
+        )
+    else:
+        s, _, _ = jax.lax.while_loop(lambda sxc: ~solver.done(sxc[0]), round_, (s, x, c))
     return solver.result(s)

@@ -20,7 +20,10 @@ carry is a :class:`~gnc_jax.systems.loop.LoopState` of the typed parts of
 :class:`~gnc_jax.guidance.entry.base.EntryGuidanceContext` of :func:`guidance_context`).
 """
 
+import dataclasses
+
 import equinox as eqx
+import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
 
@@ -84,6 +87,9 @@ class CapsuleSimulation(eqx.Module):
     substeps: int = eqx.field(static=True, default=2)  # truth steps per control step
     n_control: int = eqx.field(static=True, default=2400)
     pc_every: int = eqx.field(static=True, default=4)
+    # "lax": while_loops (evaluation, forward mode); "checkpointed": the same loops as
+    # equinox's checkpointed while_loop, reverse-mode differentiable (:func:`reverse_mode`)
+    loop_kind: str = eqx.field(static=True, default="lax")
 
     @property
     def control_dt(self) -> float:
@@ -146,6 +152,7 @@ def guidance_context(sim: CapsuleSimulation) -> EntryGuidanceContext:
         hold_bank_rad=sim.hold_bank_rad,
         ratio_filter_gain=sim.ratio_filter_gain,
         pc_every=sim.pc_every,
+        loop_kind=sim.loop_kind,
     )
 
 
@@ -311,10 +318,12 @@ def _run(sim: CapsuleSimulation, law: AbstractEntryGuidance, key, draws: Capsule
         c, rec = jax.lax.scan(lambda c, _: cycle(c), c, None, length=n_cycles)
         rec = flatten_trace(rec)
     else:
-        c, _ = jax.lax.while_loop(
+        c, _ = _while(
+            sim,
             lambda ck: (ck[1] < n_cycles) & ~ck[0].truth.done,
             lambda ck: (cycle(ck[0])[0], ck[1] + 1),
             (c, jnp.asarray(0, jnp.int32)),
+            n_cycles,
         )
         rec = None
     if rest:  # the control steps of a last, partial cycle (a finished flight is frozen)
@@ -322,6 +331,25 @@ def _run(sim: CapsuleSimulation, law: AbstractEntryGuidance, key, draws: Capsule
         if record:
             rec = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), rec, tail)
     return c, rec
+
+
+# Cycle carries reverse mode keeps per flight (loop_kind "checkpointed")
+FLIGHT_CHECKPOINTS = 32
+
+
+def _while(sim: CapsuleSimulation, cond, body, init, most: int):
+    if sim.loop_kind == "checkpointed":
+        return eqxi.while_loop(
+            cond, body, init, max_steps=most, kind="checkpointed", checkpoints=FLIGHT_CHECKPOINTS
+        )
+    return jax.lax.while_loop(cond, body, init)
+
+
+def reverse_mode(sim: CapsuleSimulation) -> CapsuleSimulation:
+    """``sim`` flown with equinox's checkpointed ``while_loop`` for the cycles of the flight
+    and the rounds of the corrector: the same loops, trip counts and arithmetic, reverse-mode
+    differentiable with memory bounded by the checkpoints (forward mode needs ``"lax"``)."""
+    return dataclasses.replace(sim, loop_kind="checkpointed")
 
 
 def _finish(sim: CapsuleSimulation, law, key, draws: CapsuleDraws, c: LoopState):

@@ -194,6 +194,9 @@ class CapsuleSystem(AbstractSystem):
         law = self.laws()[config["guidance"]["law"]]
         return sim, self.build_law(config, law_mission(law, config, sim))
 
+    def reverse_mode(self, params):
+        return capsule_sim.reverse_mode(params)
+
     def simulate(self, params, law, key, record=False):
         return capsule_sim.simulate(params, law, key, record=record)
 

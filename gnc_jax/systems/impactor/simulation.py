@@ -89,8 +89,15 @@ def run(
     record: bool,
 ) -> tuple[LoopState, StepRecord | None]:
     """Guidance up to the cut-off: one :func:`~.step.image_step` per image, each with its
-    control steps; the trace at the control rate."""
-    step = functools.partial(image_step, sim, law, key, draws, record)
+    control steps; the trace at the control rate.
+
+    Each image step is checkpointed: reverse mode keeps one loop state per image and
+    recomputes an image's control steps on the way back, so its memory is that of one image
+    interval plus a carry per image instead of every control step's residuals. Without
+    differentiation the checkpoint is inlined: the evaluation is unchanged."""
+    step = jax.checkpoint(
+        functools.partial(image_step, sim, law, key, draws, record), prevent_cse=False
+    )
     state, rec = jax.lax.scan(step, state, jnp.arange(sim.n_images))
     return state, flatten_trace(rec)
 

@@ -281,6 +281,40 @@ def test_corrector_rounds_equal_the_slot_wise_corrector(law_and_ctx):
             np.testing.assert_allclose(getattr(batched, name)[i], getattr(one, name), rtol=1e-9)
 
 
+def test_checkpointed_corrector_equals_the_while_loop_and_reverses_to_forward_mode(law_and_ctx):
+    """The corrector's rounds as equinox's checkpointed ``while_loop`` (``loop_kind =
+    "checkpointed"``, what the capsule flies in reverse mode) return what the ``lax``
+    ``while_loop`` returns, bit for bit, at the cycles of a flight, batched; and the
+    reverse-mode derivative of the solution and its predicted crossrange with respect to the
+    speed at the cycle equals the forward-mode derivative of the ``lax`` loop."""
+    _, law, ctx = law_and_ctx
+    y, t, up, sigma, model = _corrector_cycles(law_and_ctx, every=6)
+    start = jnp.asarray(sigma + np.resize(np.radians([0.0, 2.0, -7.0]), len(sigma)))
+
+    def solve(kind, scale, y, t, up, s0, m):
+        y = y._replace(v=y.v * scale)
+        res = correct(law, y, t, up, s0, m, ctx.target_fixed, jnp.asarray(True), loop_kind=kind)
+        return res
+
+    runs = (y, t, up, start, model)
+    lax_ = jax.jit(jax.vmap(lambda *a: solve("lax", 1.0, *a)))(*runs)
+    ckpt = jax.jit(jax.vmap(lambda *a: solve("checkpointed", 1.0, *a)))(*runs)
+    for name in lax_._fields:
+        np.testing.assert_array_equal(getattr(ckpt, name), getattr(lax_, name), err_msg=name)
+
+    def summary(kind):
+        def f(scale):
+            res = jax.vmap(lambda *a: solve(kind, scale, *a))(*runs)
+            return jnp.sum(res.x) + 1e-6 * jnp.sum(res.aux)
+
+        return f
+
+    reverse = float(jax.jit(jax.grad(summary("checkpointed")))(1.0))
+    forward = float(jax.jit(jax.jacfwd(summary("lax")))(1.0))
+    assert abs(forward) > 1e-3  # the solution depends on the speed
+    np.testing.assert_allclose(reverse, forward, rtol=1e-9)
+
+
 def test_midpoint_bank_at_16_s_predicts_closer_to_fine_steps_than_the_held_bank_at_8_s(
     law_and_ctx,
 ):
