@@ -239,19 +239,24 @@ def _rk4(mu, tide, s0, s1, s2, x, y, z, vx, vy, vz, m, fx, fy, fz, flow, dt):
 
 
 @njit(**_JIT)
+def _coast_increment(vx, vy, vz, c):
+    """The position change of :func:`_rk4_coast` without gravity terms (``c`` = dt / 6): it
+    depends on the velocity only, which such a step keeps."""
+    return (
+        c * (vx + 2.0 * vx + 2.0 * vx + vx),
+        c * (vy + 2.0 * vy + 2.0 * vy + vy),
+        c * (vz + 2.0 * vz + 2.0 * vz + vz),
+    )
+
+
+@njit(**_JIT)
 def _rk4_coast(mu, tide, s0, s1, s2, x, y, z, vx, vy, vz, dt):
     """:func:`_rk4` without thrust or mass flow (the same bits: those terms add zeros); without
     gravity terms every stage's velocity is v and the velocity stays (the same bits again)."""
     c = dt / 6.0
     if mu == 0.0 and tide == 0.0:
-        return (
-            x + c * (vx + 2.0 * vx + 2.0 * vx + vx),
-            y + c * (vy + 2.0 * vy + 2.0 * vy + vy),
-            z + c * (vz + 2.0 * vz + 2.0 * vz + vz),
-            vx,
-            vy,
-            vz,
-        )
+        dx, dy, dz = _coast_increment(vx, vy, vz, c)
+        return x + dx, y + dy, z + dz, vx, vy, vz
     h = 0.5 * dt
     k1u, k1v, k1w = _gravity(mu, tide, s0, s1, s2, x, y, z)
     k2x, k2y, k2z = vx + h * k1u, vy + h * k1v, vz + h * k1w
@@ -317,15 +322,19 @@ def _sigma_b(p, t_go, c_bi):
     """sqrt(sT^2 + sR^2) of the position covariance mapped to impact along a straight line
     (seed 000 eqs. 8-11): P_rr + t_go (P_rv + P_vr) + t_go^2 P_vv seen along T and R, m."""
     tt = t_go * t_go
+    # the mapped block is symmetric to the bit (p is, and its two cross terms commute)
+    p00 = p[0, 0] + t_go * (p[0, 3] + p[3, 0]) + tt * p[3, 3]
+    p01 = p[0, 1] + t_go * (p[0, 4] + p[3, 1]) + tt * p[3, 4]
+    p02 = p[0, 2] + t_go * (p[0, 5] + p[3, 2]) + tt * p[3, 5]
+    p11 = p[1, 1] + t_go * (p[1, 4] + p[4, 1]) + tt * p[4, 4]
+    p12 = p[1, 2] + t_go * (p[1, 5] + p[4, 2]) + tt * p[4, 5]
+    p22 = p[2, 2] + t_go * (p[2, 5] + p[5, 2]) + tt * p[5, 5]
     d = 0.0
     for a in range(1, 3):
         c0, c1, c2 = c_bi[a, 0], c_bi[a, 1], c_bi[a, 2]
-        m0 = m1 = m2 = 0.0
-        for i in range(3):
-            ci = c_bi[a, i]
-            m0 += ci * (p[i, 0] + t_go * (p[i, 3] + p[i + 3, 0]) + tt * p[i + 3, 3])
-            m1 += ci * (p[i, 1] + t_go * (p[i, 4] + p[i + 3, 1]) + tt * p[i + 3, 4])
-            m2 += ci * (p[i, 2] + t_go * (p[i, 5] + p[i + 3, 2]) + tt * p[i + 3, 5])
+        m0 = c0 * p00 + c1 * p01 + c2 * p02
+        m1 = c0 * p01 + c1 * p11 + c2 * p12
+        m2 = c0 * p02 + c1 * p12 + c2 * p22
         d += m0 * c0 + m1 * c1 + m2 * c2
     return np.sqrt(d)
 
@@ -479,6 +488,8 @@ def _run(
     own = rng.shape[0] > 0
     dt, image_dt = prm[DT], prm[IMAGE_DT]
     mu, tide, s0, s1, s2 = prm[MU], prm[TIDE], prm[SUN], prm[SUN + 1], prm[SUN + 2]
+    free = mu == 0.0 and tide == 0.0  # no gravity term: a coasting step keeps the velocity
+    c6 = dt / 6.0
     thrust_n, flow_max, cutoff, retarget = prm[THRUST], prm[FLOW], prm[CUTOFF], prm[RETARGET]
     k1sq, k2sq = prm[K1] * prm[K1], prm[K2] * prm[K2]
     c_res = 0.5 * prm[CTX_THRUST] / prm[CTX_MASS] * dt  # miss per s of t_go per step
@@ -519,7 +530,7 @@ def _run(
     sigma_b = _plan(prm, c_bi, p, 0.0, rh0, rh1, rh2, vh0, vh1, vh2)
     throttle_prev = 0.0
     e_mag = e_p0 = e_p1 = e_p2 = 0.0  # execution error of the current firing (normals)
-    q0 = q1 = q2 = qv = vv = 0.0  # the law's rho, rho . rho_dot, |v_hat|^2 (thrust direction)
+    q0 = q1 = q2 = qv = 0.0  # the law's rho, rho . rho_dot, |v_hat|^2 (thrust direction)
     burn_intervals = 0
     dv_total = burn_time = los_error_sq = 0.0
     firings = images_used = 0
@@ -540,6 +551,10 @@ def _run(
         # The switching curves' miss tolerances from sigma_B, squared (fixed over the interval).
         sb2 = sigma_b * sigma_b
         close_nav, open_nav = k2sq * sb2, k1sq * sb2
+        # Loop invariants while coasting, recomputed after each burn step (the same bits).
+        vv = vh0 * vh0 + vh1 * vh1 + vh2 * vh2
+        dh0, dh1, dh2 = vh0 * dt, vh1 * dt, vh2 * dt
+        dx, dy, dz = _coast_increment(vx, vy, vz, c6)
         # Execution draws of this interval's ignitions (fed: gnc_jax's burn-table row).
         row = 0 if own else burn_intervals % N_BURN_INTERVALS
         ignitions_image = 0
@@ -561,7 +576,6 @@ def _run(
                 qv = -(q0 * vh0 + q1 * vh1 + q2 * vh2)  # rho . rho_dot
                 o0, o1, o2 = q1 * vh2 - q2 * vh1, q2 * vh0 - q0 * vh2, q0 * vh1 - q1 * vh0
                 oo = o0 * o0 + o1 * o1 + o2 * o2  # |rho x rho_dot|^2
-                vv = vh0 * vh0 + vh1 * vh1 + vh2 * vh2
                 close2 = max(close_nav, c_res2 * rr / vv)  # the one-step floor (miss_limits)
                 open2 = max(open_nav, close2)
                 qq = qv * qv
@@ -617,6 +631,9 @@ def _run(
                 rh1 = rh1 + vh1 * dt + dm1 * (0.5 * dt)
                 rh2 = rh2 + vh2 * dt + dm2 * (0.5 * dt)
                 vh0, vh1, vh2 = vh0 + dm0, vh1 + dm1, vh2 + dm2
+                vv = vh0 * vh0 + vh1 * vh1 + vh2 * vh2
+                dh0, dh1, dh2 = vh0 * dt, vh1 * dt, vh2 * dt
+                dx, dy, dz = _coast_increment(vx, vy, vz, c6)
                 th2 = throttle * throttle
                 c_k = dt * (steps - k - 0.5)
                 mom_a += th2
@@ -626,10 +643,13 @@ def _run(
                 burn_time += tb
                 burn_image += tb
             else:  # coasting: truth under gravity alone, estimate along a straight line
-                x, y, z, vx, vy, vz = _rk4_coast(mu, tide, s0, s1, s2, x, y, z, vx, vy, vz, dt)
-                rh0 += vh0 * dt
-                rh1 += vh1 * dt
-                rh2 += vh2 * dt
+                if free:
+                    x, y, z = x + dx, y + dy, z + dz
+                else:
+                    x, y, z, vx, vy, vz = _rk4_coast(mu, tide, s0, s1, s2, x, y, z, vx, vy, vz, dt)
+                rh0 += dh0
+                rh1 += dh1
+                rh2 += dh2
             throttle_prev = throttle
         if do_images:
             if mom_a > 0.0:  # accelerometer white noise over the interval (accel_noise)
