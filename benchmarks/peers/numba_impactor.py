@@ -2,26 +2,28 @@
 
     python benchmarks/peers/numba_impactor.py [--quick] [--sizes 2000 10000] [--repeats 3]
 
-A scalar transcription of `gnc_jax.systems.impactor.simulation.simulate` with the LOS
-switching-curve law, as an expert numba user would write it: ``@njit(parallel=True)`` with
-``prange`` over runs, scalar code inside (vectors as three floats, the 6x6 covariance in one array
-per run), nothing allocated per step, and branches where the work is conditional (the engine fires
-in about 0.5 % of the control steps). Same truth (RK4 of the target's point-mass gravity + solar
-tide, thrust and mass flow held over the step), same camera and Gaussian LOS front end, same EKF
-(closed-form LOS Jacobian, the two angles' scalar updates written out, straight-line covariance
-growth, attitude-error rotations from power series), same law (error ellipse at each image,
-switching curves of k1 and k2 sigma_B with the one-step floor, Schmitt trigger, zero-effort-miss
-thrust direction), same error sources and the same outcome (coast to the B-plane, miss, Δv, firings,
-fuel, status ``propellant``). Every number comes from ``gj.build(scenario)``; nothing is copied by
-hand.
+A scalar transcription of `gnc_jax.systems.impactor.simulation.simulate` with the LOS switching-
+curve law, as an expert numba user would write it (the kernel:
+``benchmarks/peers/numba_impactor_kernel.py``): ``@njit(parallel=True)`` with ``prange`` over runs,
+scalar code inside (vectors as three floats, the 6x6 covariance in one array per run), nothing
+allocated per step, loop invariants of the coasting steps hoisted, and branches where the work is
+conditional (the engine fires in about 0.5 % of the control steps). Same truth (RK4 of the target's
+point-mass gravity + solar tide, thrust and mass flow held over the step), same camera and Gaussian
+LOS front end, same EKF (closed-form LOS Jacobian, the two angles' scalar updates written out,
+straight-line covariance growth, attitude-error rotations from power series), same law (error
+ellipse at each image, switching curves of k1 and k2 sigma_B with the one-step floor, Schmitt
+trigger compared multiplied out as gnc_jax compares it, zero-effort-miss thrust direction), same
+error sources and the same outcome (coast to the B-plane, miss, Δv, firings, fuel, status
+``propellant``). Every number comes from ``gj.build(scenario)``; nothing is copied by hand.
 
 Two ways to feed it random numbers:
 
 * **fed**: the standard normals gnc_jax draws,
   `gnc_jax.systems.impactor.draws.run_draws` of each run's key, stacked over runs: the
   outcomes equal gnc_jax's run for run (``tests/test_peer_numba.py``);
-* **own**: the kernel draws its own normals with numba's ``np.random.standard_normal``
-  (per-thread Mersenne twister, seeded ``seed + i`` for run ``i``), only what is used: 15 per run
+* **own**: the kernel draws its own normals by the ziggurat method from a xoshiro256**
+  generator per run (seeded through splitmix64 with ``seed + i`` for run ``i``), only what is
+  used: 15 per run
   (delivery, knowledge, attitude and accelerometer biases), 8 per image (image processing,
   attitude control, attitude knowledge), 4 per ignition (burn magnitude, pointing) and 6 per
   image interval in which the engine fired (the accelerometer's white noise integrated over the
@@ -562,7 +564,7 @@ def run(quick: bool = False, sizes=None, repeats: int | None = None) -> dict:
                 cpu_us_per_run=1e6 * own_cpu_s / n,
                 ratio_gnc_jax_vs_this=gj_rate / (n / own_s),
                 threads=threads,
-                note="np.random.standard_normal in the kernel, only what is used",
+                note="ziggurat normals of xoshiro256** in the kernel, only what is used",
             )
         )
         if batch_s is not None:
@@ -597,7 +599,8 @@ def run(quick: bool = False, sizes=None, repeats: int | None = None) -> dict:
         "excluded from the wall; the run_draws and numpy draw times of the same arrays are "
         "reported beside it (chunks of 2000 runs). Outcomes equal gnc_jax's run for run "
         "(tests/test_peer_numba.py).",
-        "numba own draws: per-thread Mersenne twister seeded seed + i per run; 8 normals per "
+        "numba own draws: ziggurat normals of a xoshiro256** generator seeded seed + i per "
+        "run; 8 normals per "
         "image, 4 per ignition, 6 per image interval with a burn, 15 per run. Statistically "
         "equal to gnc_jax (KS test in tests/test_peer_numba.py).",
         "Profile rows (CPU time per run): the fed kernel with its image updates or its control "
