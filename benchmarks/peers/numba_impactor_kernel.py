@@ -509,7 +509,7 @@ def _run(
     if own:
         _normals(rng, N_FIXED, w)
     else:
-        w[:N_FIXED] = fixed
+        w[:N_FIXED] = fixed[:N_FIXED]
     sd = prm[SIG_DELIVERY]
     x, y, z = prm[R0] + sd * w[0], prm[R0 + 1] + sd * w[1], prm[R0 + 2] + sd * w[2]
     vx, vy, vz, m = prm[V0], prm[V0 + 1], prm[V0 + 2], prm[MASS]
@@ -540,7 +540,7 @@ def _run(
         if own:
             _normals(rng, IMAGE_DRAWS, w)
         else:
-            w[:IMAGE_DRAWS] = images[i]
+            w[:IMAGE_DRAWS] = images[i, :IMAGE_DRAWS]
         if do_images:
             rh0, rh1, rh2, vh0, vh1, vh2, err2 = _image_update(
                 prm, c_bi, p, w, x, y, z, rh0, rh1, rh2, vh0, vh1, vh2, ab0, ab1, ab2, g
