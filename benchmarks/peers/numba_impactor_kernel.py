@@ -11,6 +11,10 @@ nonzero (``RelativeDynamics.of``), the filter's two scalar updates with 1/s
 
 The own-draws kernel draws with xoshiro256** (seeded per run by splitmix64 of ``seed + i``)
 and the ziggurat method (256 layers, 52-bit mantissas, as numpy's ``Generator``).
+
+Every jitted function of the peer lives in this one module: numba's on-disk cache checks only
+the file of the function it serves, so a kernel compiled against a helper in another file would
+keep the helper's old code after an edit.
 """
 
 import math
