@@ -21,6 +21,7 @@ import gnc_jax as gj  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 from benchmarks.peers import numba_impactor as peer  # noqa: E402
+from benchmarks.peers import numba_impactor_kernel as kernel  # noqa: E402
 
 # A 2000 s approach from another direction, with gravity (a ~1.4 km body at 1.2 AU) and
 # proportionally smaller errors; the gnc_jax outcomes differ from the nominal's (not one point).
@@ -78,6 +79,20 @@ def test_fed_draws_matter(scenario, fed):
     rolled = peer.run_fed(scenario, *(np.roll(a, 1, axis=0) for a in draws))
     np.testing.assert_array_equal(rolled["miss_m"], np.roll(got["miss_m"], 1))
     assert np.all(np.abs(rolled["miss_m"] - got["miss_m"]) > 1e-3)
+
+
+def test_kernel_generator_draws_standard_normals():
+    """The own-draws kernel's ziggurat (xoshiro256**) against the normal distribution: KS,
+    the first four moments and the tail beyond the ziggurat's last layer (its slow path)."""
+    x = kernel.normals(12345, 400_000)
+    assert stats.kstest(x, "norm").pvalue > 1e-3
+    n = x.size
+    assert abs(x.mean()) < 5 / np.sqrt(n) and abs(x.var() - 1.0) < 5 * np.sqrt(2 / n)
+    assert abs(stats.skew(x)) < 5 * np.sqrt(6 / n) and abs(stats.kurtosis(x)) < 5 * np.sqrt(24 / n)
+    tail = 2 * stats.norm.sf(kernel.ZIGGURAT_R)  # 2.6e-4: about 100 draws
+    count = np.count_nonzero(np.abs(x) > kernel.ZIGGURAT_R)
+    assert abs(count - n * tail) < 5 * np.sqrt(n * tail)
+    assert len(np.unique(x)) == n and not np.array_equal(x[:10], kernel.normals(12346, 10))
 
 
 def test_own_draws_are_reproducible_per_run():
