@@ -53,7 +53,7 @@ class MeasurementSetup(NamedTuple):
 
     camera: CameraModel  # camera and detector
     target: TargetModel  # the target's shape, orientation and lighting
-    image_processing_rad: Scalar  # 1-sigma centroiding error per angle (the filter's model)
+    image_processing_rad: Scalar  # 1-sigma centroiding error per angle drawn by the truth
     phase_correction: Scalar  # 1.0: remove the predicted centre-of-brightness offset
 
 

@@ -2,6 +2,8 @@
 (:class:`~gnc_jax.systems.impactor.params.ImpactorParams`, SI) into the
 :class:`~.state.ImpactorSimulation` one run reads."""
 
+import dataclasses
+
 import jax.numpy as jnp
 
 from ...constants import GM_SUN_M3S2
@@ -21,6 +23,27 @@ def measurement_setup(p: ImpactorParams) -> MeasurementSetup:
         image_processing_rad=p.errors.image_processing_rad,
         phase_correction=p.navigation.phase_correction,
     )
+
+
+_MODELLED = (
+    "image_processing_rad",
+    "attitude_noise_rad",
+    "attitude_bias_rad",
+    "accel_bias_mps2",
+    "accel_noise_mps2",
+)
+"""The error sources the filter also models; ``navigation.model_<name>`` sets its own value."""
+
+
+def noise_model(p: ImpactorParams):
+    """The error sources as the filter models them: the truth's ``errors``, with each
+    ``navigation.model_*`` field that is set (non-negative) in place of the truth's value."""
+    nav = p.navigation
+    values = {}
+    for name in _MODELLED:
+        model = getattr(nav, f"model_{name}")
+        values[name] = getattr(p.errors, name) if float(model) < 0.0 else model
+    return dataclasses.replace(p.errors, **values)
 
 
 def build(scenario) -> ImpactorSimulation:
@@ -60,6 +83,7 @@ def build(scenario) -> ImpactorSimulation:
         mass_kg=sc.mass_kg,
         propellant_kg=sc.propellant_kg,
         errors=p.errors,
+        noise_model=noise_model(p),
         focal_length_m=p.camera.focal_length_m,
         process_noise_m2s3=p.navigation.process_noise_m2s3,
         consider_attitude_bias=p.navigation.consider_attitude_bias,
@@ -73,4 +97,4 @@ def build(scenario) -> ImpactorSimulation:
     )
 
 
-__all__ = ["build", "measurement_setup"]
+__all__ = ["build", "measurement_setup", "noise_model"]

@@ -102,7 +102,7 @@ def initial_conditions(sim: ImpactorSimulation, key: PRNGKeyArray):
     p_pos = matmul(c_bi.T * err.knowledge_position_m**2, c_bi)
     p0 = jax.scipy.linalg.block_diag(p_pos, err.knowledge_velocity_mps**2 * jnp.eye(3))
     p0 = p0 + sim.consider_attitude_bias * attitude_bias_covariance(
-        sim.r0_m, sim.v0_mps, err.attitude_bias_rad
+        sim.r0_m, sim.v0_mps, sim.noise_model.attitude_bias_rad
     )
     draws = dict(
         delivery_error_m=matvec3(c_bi, delivery),

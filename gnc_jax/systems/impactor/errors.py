@@ -53,7 +53,8 @@ class ImpactorErrors(eqx.Module):
         lo=0.0,
         hi=1e5,
         units="urad",
-        doc="centroiding error of the noise front end (and the filter's model of it)",
+        doc="centroiding error of the noise front end (and the filter's model of it unless "
+        "navigation.model_image_processing_urad is set)",
     )
     attitude_control_rad: Scalar = param(
         320.0,

@@ -89,9 +89,9 @@ def image_update(
     vectors, the update as two scalar updates on the 21 packed entries
     (``navigation.packed_ekf``).
     """
-    err = sim.errors
+    model = sim.noise_model
     c_true, c_est = attitudes
-    r_var = err.image_processing_rad**2 + err.attitude_noise_rad**2
+    r_var = model.image_processing_rad**2 + model.attitude_noise_rad**2
     # predict_los through the believed attitude, row by row.
     h_r, predicted = predict_los_packed(c_est, r_hat, p, r_var)
     exposure = Exposure(-r_true, jnp.stack(c_true), jnp.stack(c_est))

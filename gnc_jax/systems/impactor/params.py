@@ -23,7 +23,7 @@ from ...dynamics.impactor import straight_line_time_to_b_plane
 from ...navigation.camera import small_rotation
 from ...navigation.render import CameraModel, TargetModel
 from ...params import from_scenario, param
-from .errors import ImpactorErrors
+from .errors import UG, URAD, ImpactorErrors
 from .schema import MAX_TIDE_RATIO, MIN_RANGE_RADII, MIN_SPEED_KMPS, MIN_SUN_AU
 
 
@@ -275,6 +275,20 @@ class TargetParams(eqx.Module):
         return TargetModel(self.semi_axes_m, small_rotation(self.orientation_rad), sun_direction)
 
 
+def _model(truth: str, units: str, scale: float, what: str):
+    """A field of the filter's noise model: negative (the default) means the truth's value."""
+    return param(
+        -1.0,
+        section="navigation",
+        toml=f"model_{truth}",
+        scale=scale,
+        lo=-1.0,
+        hi=1e6,
+        units=units,
+        doc=f"1-sigma {what} the filter assumes; negative: the truth's errors.{truth}",
+    )
+
+
 class NavigationParams(eqx.Module):
     """The filter's process noise and prior, and the measurement front end."""
 
@@ -291,6 +305,17 @@ class NavigationParams(eqx.Module):
         section="navigation",
         doc="add the attitude-bias rotation to the initial covariance",
     )
+    model_image_processing_rad: Scalar = _model(
+        "image_processing_urad", "urad", URAD, "centroiding error"
+    )
+    model_attitude_noise_rad: Scalar = _model(
+        "attitude_noise_urad", "urad", URAD, "attitude determination noise"
+    )
+    model_attitude_bias_rad: Scalar = _model(
+        "attitude_bias_urad", "urad", URAD, "attitude determination bias"
+    )
+    model_accel_bias_mps2: Scalar = _model("accel_bias_ug", "ug", UG, "accelerometer bias")
+    model_accel_noise_mps2: Scalar = _model("accel_noise_ug", "ug", UG, "accelerometer noise")
     # The choices are the registered front ends, read when the schema is (ImpactorSystem).
     measurement: str = param(
         "noise",

@@ -34,7 +34,10 @@ class ImpactorSimulation(eqx.Module):
         context: on-board mission data (B-plane frame, aim points, engine, timing).
         dynamics: true differential gravity; engine: true nominal engine; mass_kg: initial mass;
         propellant_kg: usable propellant (a run that burns more is flagged ``propellant``).
-        errors: 1-sigma error sources.
+        errors: 1-sigma error sources of the truth (what the draws scale).
+        noise_model: the error sources as the filter models them (measurement noise, the
+            accelerometer's Δv error, the attitude-bias consider term): ``errors`` with the
+            ``navigation.model_*`` fields that are set.
         focal_length_m: camera focal length.
         process_noise_m2s3: white-acceleration density of the filter's process noise.
         consider_attitude_bias: 1.0 to add the attitude-bias rotation to the filter's initial
@@ -57,6 +60,7 @@ class ImpactorSimulation(eqx.Module):
     mass_kg: Scalar
     propellant_kg: Scalar
     errors: ImpactorErrors
+    noise_model: ImpactorErrors
     focal_length_m: Scalar
     process_noise_m2s3: Scalar
     consider_attitude_bias: Scalar

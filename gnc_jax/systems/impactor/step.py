@@ -199,7 +199,8 @@ def end_interval(sim: ImpactorSimulation, state: LoopState, row) -> LoopState:
     dr, dv = accel_noise(err.accel_noise_mps2 * dt, estimate.accel_moments, row[8:14])
     # Covariance: straight-line growth over the interval plus the accelerometer's Δv error.
     tb = estimate.burn_time_image_s
-    q_dv = err.accel_noise_mps2**2 * dt * tb + err.accel_bias_mps2**2 * tb**2
+    model = sim.noise_model
+    q_dv = model.accel_noise_mps2**2 * dt * tb + model.accel_bias_mps2**2 * tb**2
     p = propagate_packed(estimate.p, ctx.image_interval_s, sim.process_noise_m2s3, q_dv)
     return state._replace(
         estimate=estimate._replace(r_hat=estimate.r_hat + dr, v_hat=estimate.v_hat + dv, p=p),

@@ -111,6 +111,9 @@ def build(scenario) -> PNSimulation:
         engine=engine,
         errors=p.errors,
         process_noise_m2s3=nv.process_noise_m2s3,
+        model_attitude_rad=(
+            p.errors.attitude_rad if float(nv.model_attitude_rad) < 0.0 else nv.model_attitude_rad
+        ),
         c_bi=c_bi,
         los_frame0=los_frame0,
         planar=planar,

@@ -54,7 +54,8 @@ def take_image(
 ):
     """One LOS measurement and the gain of its EKF update: the camera points at the estimated
     target direction (x_c = h x boresight lies in the orbit plane), the attitude error is white
-    angle noise of the front end (``sim.measurement``) and the filter's measurement noise.
+    angle noise of the front end (``sim.measurement``); the filter's measurement noise is
+    ``sim.model_attitude_rad`` (the same unless ``navigation.model_attitude_urad`` is set).
     ``w``: the image's two measurement normals; ``key``: for front ends that draw more.
 
     The update is ``navigation.ekf.ekf_update`` of ``predict_los`` in packed, sequential form
@@ -67,7 +68,7 @@ def take_image(
     # matrix is built only for the front end's exposure (read row-wise it is never stored).
     rows = camera_axes(-r_hat, sim.context.reference_normal)
     c_cam = jnp.stack(rows)
-    r_var = jnp.maximum(sim.errors.attitude_rad, 1e-9) ** 2
+    r_var = jnp.maximum(sim.model_attitude_rad, 1e-9) ** 2
     h_r, predicted = predict_los_packed(rows, r_hat, p, r_var)
     nav = NavEstimate(jnp.concatenate([r_hat, v_hat]), unpack(p))
     meas = sim.measurement(Exposure(-r_true, c_cam, c_cam), nav, predicted, w, key)

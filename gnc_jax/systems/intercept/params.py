@@ -166,6 +166,16 @@ class Navigation(eqx.Module):
         "guidance step, Fig. 4)",
     )
     process_noise_m2s3: Scalar = _navigation(1e-18, lo=0.0, hi=1.0, units="m^2/s^3")
+    model_attitude_rad: Scalar = _navigation(
+        -1.0,
+        toml="model_attitude_urad",
+        convert=lambda urad: urad * 1e-6,
+        lo=-1.0,
+        hi=1e5,
+        units="urad",
+        doc="1-sigma LOS angle noise the filter assumes; negative: the truth's "
+        "errors.attitude_urad",
+    )
 
 
 class PNErrors(eqx.Module):

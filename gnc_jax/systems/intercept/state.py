@@ -23,6 +23,8 @@ class PNSimulation(eqx.Module):
         y0: nominal initial truth (target heliocentric, impactor relative, mass).
         context: on-board data of the law; dynamics: true force model; engine: true engine.
         errors: 1-sigma error sources; process_noise_m2s3: filter white-acceleration density.
+        model_attitude_rad: the LOS angle noise the filter assumes (``errors.attitude_rad``
+            unless ``navigation.model_attitude_urad`` is set).
         c_bi: B-plane frame (S, T, R) of the nominal approach; los_frame0: rows (along LOS,
             across it in the orbit plane, out of plane) at t = 0, for the knowledge errors.
         planar: keep every error in the orbit plane (static); nav_model: "ekf" or "perfect".
@@ -37,6 +39,7 @@ class PNSimulation(eqx.Module):
     engine: Engine
     errors: PNErrors
     process_noise_m2s3: Scalar
+    model_attitude_rad: Scalar
     c_bi: Matrix3
     los_frame0: Matrix3
     measurement: AbstractMeasurement
