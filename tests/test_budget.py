@@ -92,6 +92,22 @@ def test_groups_and_inactive_sources(toy):
     assert b.share("y", "s12", "total")["share"] == pytest.approx(1.0, abs=0.3)
 
 
+def test_budget_does_not_depend_on_chunking_or_devices(toy):
+    """Every design's per-run metrics, the linear responses and hence every index are the
+    same, bit for bit, whatever the chunk size and the number of devices."""
+    assert len(jax.devices()) >= 2  # the test session's host devices (gnc_jax._config)
+    sc = toy.toy_scenario(p=0.5)
+    runs = dict(runs=40, seed=3, bootstrap=50)
+    ref = gj.budget(sc, chunk_size=40, n_devices=1, **runs)
+    for chunk, devices in ((8, 1), (6, 2), (None, 2)):
+        b = gj.budget(sc, chunk_size=chunk, n_devices=devices, **runs)
+        assert b.samples.keys() == ref.samples.keys()
+        for design, (values, ok) in ref.samples.items():
+            np.testing.assert_array_equal(b.samples[design][0], values, err_msg=design)
+            np.testing.assert_array_equal(b.samples[design][1], ok, err_msg=design)
+        assert b.rows == ref.rows and b.nominal == ref.nominal
+
+
 @pytest.mark.parametrize(
     "call, message",
     [

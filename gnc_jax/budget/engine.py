@@ -73,6 +73,8 @@ def budget(
     progress: bool | None = None,
     bootstrap: int = BOOTSTRAP,
     level: float = estimators.LEVEL,
+    chunk_size: int | None = None,
+    n_devices: int | None = None,
 ) -> Budget:
     """The error budget of ``scenario`` (see the module docstring).
 
@@ -87,6 +89,8 @@ def budget(
             ``{group: (source, ...)}``; ``None``: every source alone.
         methods: a subset of ``("sobol", "oat", "linear")``.
         bootstrap, level: resamples and confidence level of the intervals.
+        chunk_size, n_devices: as :func:`~gnc_jax.run_study`'s, for every design (and the
+            linear pass's chunk); no index depends on them, run for run.
     """
     system = get_system(scenario.kind)
     seed = scenario.seed if seed is None else seed
@@ -121,6 +125,8 @@ def budget(
             seed,
             progress=False,
             max_hours=max_hours,
+            chunk_size=chunk_size,
+            n_devices=n_devices,
             draws=plan(seed, seed_b, n, lay, from_b, on),
         )
         compile_s += st.compile_s
@@ -145,7 +151,7 @@ def budget(
             t_lin = time.perf_counter()
             try:
                 linear = linear_responses(
-                    system, sim, law, seed, runs, metrics, n, lay, progress=bar.update
+                    system, sim, law, seed, runs, metrics, n, lay, chunk_size or 64, bar.update
                 )
             except Exception as e:  # a construct forward mode cannot differentiate
                 linear = f"{type(e).__name__}: {str(e).splitlines()[0][:200]}"
@@ -153,7 +159,7 @@ def budget(
     finally:
         bar.close()
     wall_s = time.perf_counter() - t0
-    nominal = _nominal(system, scenario, runs, metrics, n, lay, seed)
+    nominal = _nominal(system, scenario, runs, metrics, n, lay, seed, (chunk_size, n_devices))
     rows = _analyse(designs, linear, names, metrics, runs, (bootstrap, seed, level))
     if isinstance(linear, tuple):
         for i, name in enumerate(names):
@@ -178,10 +184,19 @@ def budget(
     )
 
 
-def _nominal(system, scenario, runs, metrics, n, lay, seed) -> dict:
+def _nominal(system, scenario, runs, metrics, n, lay, seed, engine) -> dict:
     """The all-off run: every draw zero. Run as a design of ``runs`` runs (the program the
     other designs compiled), which must all be the same run."""
-    st = run_study(scenario, runs, seed, progress=False, draws=plan(seed, seed, n, lay, on=()))
+    chunk_size, n_devices = engine
+    st = run_study(
+        scenario,
+        runs,
+        seed,
+        chunk_size,
+        False,
+        n_devices,
+        draws=plan(seed, seed, n, lay, on=()),
+    )
     o = st.outcomes
     values = {m: np.asarray(system.budget_metrics[m](o), float) for m in metrics}
     same = all(np.array_equal(v, np.full_like(v, v[0]), equal_nan=True) for v in values.values())
