@@ -123,6 +123,27 @@ def test_bad_requests_are_refused_in_one_line(toy, call, message):
     assert str(e.value) == message
 
 
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--runs", "2"], "runs: 2; allowed: an integer >= 8"),
+        (["--runs", "x"], "--runs: 'x'; allowed: an integer"),
+        (["--metrics", "z"], "metrics: 'z'; allowed: y"),
+        (["--methods", "mc"], "methods: 'mc'; allowed: sobol, oat, linear"),
+        (["--set", "coefficients.q=1"], "coefficients.q: unknown field"),
+    ],
+)
+def test_cli_refuses_bad_requests_in_one_line(toy, capsys, args, message):
+    from gnc_jax import cli
+
+    toml = str(pathlib.Path(__file__).with_name("toy_budget.toml"))
+    with pytest.raises(SystemExit) as e:
+        sys.exit(cli.main(["budget", toml, *args]))
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err, err
+
+
 def _impactor_key(from_b):
     sc = gj.load_scenario("deep-impact-los")
     facs, _ = factors(sc.system, sc)

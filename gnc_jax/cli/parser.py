@@ -134,7 +134,10 @@ def _add_budget(sub) -> None:
     q = sub.add_parser("budget", help="variance-based error budget: which source drives a metric")
     q.add_argument("scenario", help="packaged scenario name (gnc-jax list) or a .toml path")
     q.add_argument(
-        "--runs", type=_positive_int("--runs"), default=200, help="runs per design (default 200)"
+        "--runs",
+        type=_number("--runs", int, lambda v: True, "an integer"),  # the bound: gj.budget's
+        default=200,
+        help="runs per design (default 200)",
     )
     q.add_argument("--seed", type=_seed, default=None, help="root seed (default: scenario's)")
     q.add_argument(

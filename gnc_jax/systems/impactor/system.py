@@ -158,7 +158,8 @@ def _centroid_frames_figure(scenario, trace, out: pathlib.Path) -> pathlib.Path:
 
     Frames at four mission times along run 0's true trajectory, rendered by the image front
     end with the scenario's camera and target (camera pointed at the navigation estimate, no
-    attitude error), centroided by the seed 002 pipeline. Shown for every impactor study: with
+    attitude error, binning for the filter's measurement noise ``navigation.model_*``),
+    centroided by the seed 002 pipeline. Shown for every impactor study: with
     ``navigation.measurement = "noise"`` it illustrates what the noise model stands for.
     """
 
@@ -167,8 +168,8 @@ def _centroid_frames_figure(scenario, trace, out: pathlib.Path) -> pathlib.Path:
     cam, tgt = sim.camera, sim.target
     t_end = float(trace.t_s[-1])
     times = [0.0, 0.5 * t_end, 0.85 * t_end, t_end - 660.0]  # the last: ~12 min before impact
-    err = sim.errors
-    pointing = float(np.hypot(err.image_processing_rad, err.attitude_noise_rad))
+    model = sim.noise_model  # the filter's measurement noise, which the loop's binning sees
+    pointing = float(np.hypot(model.image_processing_rad, model.attitude_noise_rad))
     fig, axes = plt.subplots(1, 4, figsize=(16, 4.4))
     for n, (ax, t) in enumerate(zip(axes, times)):
         i = int(np.clip(np.searchsorted(trace.t_s, t), 0, len(trace.t_s) - 1))
