@@ -359,6 +359,16 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         "within 140 m/s of the reference's; the 9 failed runs of 200 switched 250-1470 m/s "
         "above it, at 60-66 km, after corrector cycles that could not bracket. 1e5 disables it",
     )
+    entry_mode: str = param(
+        "auto",
+        choices=("auto", "skip", "direct"),
+        doc="'skip': the combined law of seed 003 (a first entry, a Kepler phase or an apogee, "
+        "a tracked second entry); 'direct': the same predictor-corrector with a constant "
+        "predicted bank down to the chute, no Kepler phase and no second entry, bank reversals "
+        "inside the crossrange funnel (targets short of the skip's reach); 'auto': 'direct' "
+        "where the target lies inside the nominal vehicle's direct reach (constant-bank "
+        "landings without a skip: gnc_jax.guidance.entry.direct), else 'skip'",
+    )
     n_bracket: int = param(6, lo=1, hi=100, doc="bracketing steps of the corrector")
     n_iter: int = param(6, lo=1, hi=100, doc="regula-falsi iterations of the corrector")
 
@@ -399,14 +409,24 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         return section["kepler_load_g"]
 
     @classmethod
+    def entry_mode_of(cls, section) -> str:
+        """The entry mode ``section`` asks for ("auto", "skip" or "direct")."""
+        return section["entry_mode"]
+
+    @classmethod
     def from_config(cls, section, config, ctx: EntryMission | None = None):
         """The law of a scenario, from the capsule system's :class:`EntryMission` ``ctx``
         (:func:`gnc_jax.systems.capsule.reference.law_mission`): the chute altitude (m),
-        where guidance ends, and the reference designed for the scenario."""
+        where guidance ends, the reference designed for the scenario and the entry mode it
+        was designed for ("auto" resolved by the capsule system)."""
         if ctx is None:
             raise ValueError("the skip-entry law is built with the capsule's EntryMission")
         return from_config(
-            cls, section, reference=ctx.reference, chute_altitude_m=ctx.chute_altitude_m
+            cls,
+            section,
+            reference=ctx.reference,
+            chute_altitude_m=ctx.chute_altitude_m,
+            entry_mode=ctx.entry_mode,
         )
 
     # ---- the guidance-law protocol ----
