@@ -35,7 +35,7 @@ class PhaseEvents(NamedTuple):
 def is_direct(law) -> bool:
     """Whether the law flies its direct-entry mode (static): no Kepler phase, no second
     entry (:mod:`gnc_jax.guidance.entry.direct`)."""
-    return law.entry_mode == "direct"
+    return law.direct
 
 
 def hold_bank_rad(law, ctx: EntryGuidanceContext) -> Scalar:

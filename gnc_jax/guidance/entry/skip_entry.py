@@ -46,6 +46,7 @@ system (:mod:`gnc_jax.systems.capsule.reference`) and handed to
 
 import math
 
+import equinox as eqx
 import jax.numpy as jnp
 
 from ..._types import Scalar
@@ -103,10 +104,14 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         track_bank_min_rad: smallest bank magnitude (and largest, pi minus it) the second
             entry commands: a lift vector held straight up or down has no lateral component.
         chute_altitude_m: end of guidance.
+        direct: whether the law flies its direct-entry mode (static), resolved by the capsule
+            system from ``entry_mode`` and handed over in the mission.
     """
 
     reference: ReferenceTrajectory
     chute_altitude_m: Scalar
+    # the mode flown, resolved by the capsule system from entry_mode ("auto": from the reach)
+    direct: bool = eqx.field(static=True, default=False)
     k_drag_load: Scalar = param(
         1.0,
         lo=0.0,
@@ -447,7 +452,7 @@ class SkipEntryGuidance(AbstractEntryGuidance):
             section,
             reference=ctx.reference,
             chute_altitude_m=ctx.chute_altitude_m,
-            entry_mode=ctx.entry_mode,
+            direct=ctx.entry_mode == "direct",
         )
 
     # ---- the guidance-law protocol ----
