@@ -23,7 +23,7 @@ import gnc_jax as gj  # noqa: E402
 from gnc_jax.guidance.entry.direct import direct_reach, scan_direct  # noqa: E402
 from gnc_jax.schema import ScenarioError  # noqa: E402
 from gnc_jax.systems.capsule import simulation as capsule_sim  # noqa: E402
-from gnc_jax.systems.capsule.reference import _problem  # noqa: E402
+from gnc_jax.systems.capsule.reference import nominal_problem  # noqa: E402
 
 RANGES_KM = (1400, 1600, 2000, 2400, 2800, 3000, 3200, 3400, 3600, 4000, 5000, 6000)
 
@@ -81,7 +81,7 @@ def main():
     ranges = [float(x) for x in sys.argv[3].split(",")] if len(sys.argv) > 3 else RANGES_KM
     out.mkdir(parents=True, exist_ok=True)
     sc = gj.load_scenario("lunar-skip-entry")
-    problem = _problem(sc.config, capsule_sim.build(sc), 0.2)
+    problem = nominal_problem(sc.config, capsule_sim.build(sc), 0.2)
     boundary_km = sc.config["entry"]["range_km"] + direct_reach(scan_direct(problem))[1] / 1e3
     rows = sweep(runs, ranges)
     (out / "sweep.json").write_text(json.dumps(rows, indent=1))

@@ -26,7 +26,9 @@ from .params import ReferenceDesignParams
 from .simulation import CapsuleSimulation
 
 
-def _problem(config: dict, sim: CapsuleSimulation, switch_load_g: float) -> NominalProblem:
+def nominal_problem(config: dict, sim: CapsuleSimulation, switch_load_g: float) -> NominalProblem:
+    """The reference design's problem: the nominal vehicle, entry and target of ``sim``, the
+    switch load (g) and the ``[reference]`` section's end speed of the second-entry profile."""
     ref = from_scenario(ReferenceDesignParams, config)
     return NominalProblem(
         model=EntryModel(sim.vehicle, sim.earth, sim.atmosphere),
@@ -48,7 +50,7 @@ def scenario_reference(
     by a hash of the ``entry``, ``vehicle`` and ``atmosphere`` sections, the switch load and
     the design settings."""
     ref = from_scenario(ReferenceDesignParams, config)
-    problem = _problem(config, sim, switch_load_g)
+    problem = nominal_problem(config, sim, switch_load_g)
     # the problem named in file units (the cache file's name: keep it as it is)
     description = {
         "entry": config["entry"],
@@ -86,16 +88,21 @@ def mode_reference(config: dict, sim: CapsuleSimulation, switch_load_g: float, m
     either is refused with both intervals)."""
     if mode == "skip":
         return scenario_reference(config, sim, switch_load_g), "skip"
-    problem = _problem(config, sim, switch_load_g)
+    problem = nominal_problem(config, sim, switch_load_g)
     scan = scan_direct(problem)
     reach = direct_reach(scan)
     inside = reach is not None and reach[0] <= 0.0 <= reach[1]
-    if mode == "auto" and not inside:
+    if mode == "direct" or inside:
         try:
-            return scenario_reference(config, sim, switch_load_g), "skip"
-        except ScenarioError as e:
-            raise ScenarioError(
-                f"{e}; a direct entry reaches {reach_text(reach, config['entry'])}"
-            ) from None
-    bank = design_direct(problem, config["entry"], config["vehicle"], scan)
-    return direct_reference(problem, bank, 1e3 * config["entry"]["range_km"]), "direct"
+            bank = design_direct(problem, config["entry"], config["vehicle"], scan)
+            return direct_reference(problem, bank, 1e3 * config["entry"]["range_km"]), "direct"
+        except ScenarioError:
+            if mode == "direct":
+                raise
+            # (auto: inside the reach, but no two neighbouring direct landings bracket it)
+    try:
+        return scenario_reference(config, sim, switch_load_g), "skip"
+    except ScenarioError as e:
+        raise ScenarioError(
+            f"{e}; a direct entry reaches {reach_text(reach, config['entry'])}"
+        ) from None

@@ -15,7 +15,7 @@ from gnc_jax.guidance.entry import direct
 from gnc_jax.guidance.entry.base import flight_variables
 from gnc_jax.schema import ScenarioError
 from gnc_jax.systems.capsule import simulation as capsule_sim
-from gnc_jax.systems.capsule.reference import _problem, mode_reference
+from gnc_jax.systems.capsule.reference import mode_reference, nominal_problem
 
 ZERO = [
     f"dispersions.{k}=0.0"
@@ -37,7 +37,7 @@ ZERO = [
 def _setup(range_km):
     sc = gj.load_scenario("lunar-skip-entry", overrides=[f"entry.range_km={range_km}"])
     sim = capsule_sim.build(sc)
-    return sc, sim, _problem(sc.config, sim, 0.2)
+    return sc, sim, nominal_problem(sc.config, sim, 0.2)
 
 
 def _track_range_km(u, start, azimuth, r_e_km):
@@ -115,7 +115,8 @@ def test_mode_choice_from_the_reach():
 
 def test_refusals_name_the_field_and_the_interval():
     """A direct entry at the packaged 8000 km is refused in one line naming entry.range_km
-    with the direct reach; so is an unknown entry_mode, before any design."""
+    with the direct reach; a target short of both modes (800 km) with the skip's interval
+    and the direct reach; an unknown entry_mode before any design."""
     sc, sim, problem = _setup(8000.0)
     with pytest.raises(ScenarioError) as e:
         mode_reference(sc.config, sim, 0.2, "direct")
@@ -124,6 +125,12 @@ def test_refusals_name_the_field_and_the_interval():
     lo, hi = (float(x) for x in re.search(r"allowed: (\d+) \.\. (\d+) km", msg).groups())
     reach = direct.direct_reach(direct.scan_direct(problem))
     assert (lo, hi) == (round(8000 + reach[0] / 1e3), round(8000 + reach[1] / 1e3))
+    sc, sim, _ = _setup(800.0)  # short of both: the skip's refusal, with the direct reach
+    with pytest.raises(ScenarioError) as e:
+        mode_reference(sc.config, sim, 0.2, "auto")
+    msg = str(e.value)
+    assert msg.startswith("entry.range_km: 800 km") and "\n" not in msg
+    assert f"a direct entry reaches {lo:.0f} .. {hi:.0f} km" in msg
     with pytest.raises(ScenarioError) as e:
         gj.load_scenario("lunar-skip-entry", overrides=["guidance.skip_entry.entry_mode=glide"])
     msg = str(e.value)
