@@ -193,6 +193,12 @@ class AbstractEntryGuidance(AbstractGuidanceLaw):
         return None
 
     @classmethod
+    def entry_mode_of(cls, section: dict) -> str:
+        """The entry mode the law's scenario ``section`` asks of the reference design:
+        "skip", "direct" or "auto" (the design chooses from the reach). Default: "skip"."""
+        return "skip"
+
+    @classmethod
     def check_entry(cls, section: dict, entry_altitude_m: float) -> None:
         """Cross-field checks of the law's validated ``section`` against the capsule's entry
         interface altitude (m), which the capsule system's checks hand it; raise

@@ -10,6 +10,7 @@ import jax
 import jax.numpy as jnp
 
 from ...root_finding import RegulaFalsiResult, regula_falsi
+from .phases import is_direct
 from .predictor import (
     finished_prediction,
     integrating,
@@ -130,7 +131,7 @@ def correct(
         law.bracket_step_rad,
         law.bank_min_rad,
         law.bank_max_rad,
-        law.range_tolerance_m,
+        law.direct_range_tolerance_m if is_direct(law) else law.range_tolerance_m,
         law.n_bracket,
         law.n_iter,
         illinois=True,

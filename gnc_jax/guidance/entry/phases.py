@@ -32,6 +32,12 @@ class PhaseEvents(NamedTuple):
     to_track: Array  # 1 or 2 -> 3: the switch point
 
 
+def is_direct(law) -> bool:
+    """Whether the law flies its direct-entry mode (static): no Kepler phase, no second
+    entry (:mod:`gnc_jax.guidance.entry.direct`)."""
+    return law.direct
+
+
 def hold_bank_rad(law, ctx: EntryGuidanceContext) -> Scalar:
     """Bank magnitude of the hold phase (see ``hold_bank``), rad."""
     if law.hold_bank == "designed":
@@ -85,6 +91,9 @@ def phase_events(law, state: SkipEntryState, fv: FlightVariables, ng, live):
         (kepler_end & slow)
         | ((phase == 1) & skip_switch(law, pulled, fv.hdot_mps, ng, fv.speed_mps))
     )
+    if is_direct(law):  # the first entry lasts down to the chute
+        to_kepler = to_track = jnp.zeros_like(to_kepler)
+        phase = jnp.where(start | (state.phase == 1), 1, state.phase)
     phase = jnp.where(live & kepler_end & ~slow, 1, phase)
     phase = jnp.where(to_track, 3, phase)
     return phase, pulled, dip, PhaseEvents(start, to_kepler, to_track)
@@ -118,11 +127,14 @@ def bank_sign(law, state: SkipEntryState, phase, fv, chi_switch, chi_now, live, 
     The bank reverses when the crossrange leaves the funnel (phases 1 and 3); the first
     entry judges the crossrange predicted at the switch point, which includes the drift of
     the rotating Earth under the Kepler arc, against :func:`switch_threshold_m`."""
-    chi = jnp.where(phase == 1, chi_switch, chi_now)
+    if is_direct(law):  # no switch point: the funnel on the crossrange now, as the second entry
+        chi, threshold = chi_now, funnel_m(law, fv.speed_mps)
+    else:
+        chi = jnp.where(phase == 1, chi_switch, chi_now)
+        threshold = jnp.where(
+            phase == 1, switch_threshold_m(law, pulled, ng), funnel_m(law, fv.speed_mps)
+        )
     want = -jnp.sign(chi)  # negative bank turns left, towards a target on the left
-    threshold = jnp.where(
-        phase == 1, switch_threshold_m(law, pulled, ng), funnel_m(law, fv.speed_mps)
-    )
     outside = (jnp.abs(chi) > threshold) & ((phase == 1) | (phase == 3))
     reverse = live & outside & (want != state.sign)
     return jnp.where(reverse, want, state.sign), reverse

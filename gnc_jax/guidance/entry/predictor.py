@@ -35,7 +35,7 @@ from .base import (
     flight_variables,
     hermite_crossing,
 )
-from .phases import apogee_gate, skip_switch, switch_by_speed
+from .phases import apogee_gate, is_direct, skip_switch, switch_by_speed
 from .state import SkipEntryState
 
 
@@ -94,7 +94,10 @@ class _PredictorState(NamedTuple):
 
 
 def profile(law, sigma_0, v_0, speed):
-    """|sigma|(v) of the first entry: linear in speed from sigma_0 at v_0 to sigma_f."""
+    """|sigma|(v) of the first entry: linear in speed from sigma_0 at v_0 to sigma_f; in the
+    direct mode the constant sigma_0."""
+    if is_direct(law):
+        return sigma_0 + jnp.zeros_like(speed)
     v_sw = law.reference.switch_velocity_mps
     span = jnp.maximum(v_0 - v_sw, 1.0)
     s = jnp.clip((v_0 - speed) / span, 0.0, 1.0)
@@ -244,6 +247,8 @@ def predictor_step(law, c: _PredictorState, sigma_0, v_0, model) -> _PredictorSt
     on_speed = pulled & (speed1 <= law.reference.switch_velocity_mps)
     crest = ~kepler & skip_switch(law, pulled, hdot1, ng1, speed1)
     second = c.second | jnp.where(by_speed, on_speed, crest)
+    if is_direct(law):  # down to the chute on the constant bank
+        kepler = switch = second = jnp.zeros_like(kepler)
     chute = alt1 < law.chute_altitude_m
     skip = alt1 > law.skip_out_altitude_m
     dive = ~(ng1 <= law.predictor_dive_load_g)  # (a NaN state too)
@@ -256,7 +261,7 @@ def predictor_step(law, c: _PredictorState, sigma_0, v_0, model) -> _PredictorSt
             dt_next = jnp.where(ng1 < law.predictor_coast_load_g, law.predictor_coast_dt_s, dt_next)
         speed_bank = speed1 + (0.5 * dt_next / dt) * (speed1 - c.now.speed_mps)
     cos_b1 = jnp.cos(predicted_bank(law, second, sigma_0, v_0, speed_bank))
-    if law.predictor_apogee == "blend":
+    if law.predictor_apogee == "blend" and not is_direct(law):
         cos_b1 = apogee_blend(
             law,
             cos_b1,

@@ -117,7 +117,10 @@ class EntryMission(NamedTuple):
         reference: the second-entry reference designed for this vehicle, entry and target
             (for a law whose :meth:`AbstractEntryGuidance.reference_switch_load_g` is not
             ``None``), else ``None``.
+        entry_mode: the mode the reference was designed for, "skip" or "direct"
+            (:mod:`gnc_jax.guidance.entry.direct`).
     """
 
     chute_altitude_m: Scalar
     reference: ReferenceTrajectory | None = None
+    entry_mode: str = "skip"

@@ -46,6 +46,7 @@ system (:mod:`gnc_jax.systems.capsule.reference`) and handed to
 
 import math
 
+import equinox as eqx
 import jax.numpy as jnp
 
 from ..._types import Scalar
@@ -67,7 +68,7 @@ from .base import (
     flight_variables,
 )
 from .corrector import corrector_cycle
-from .phases import bank_sign, hold_bank_rad, phase_events
+from .phases import bank_sign, hold_bank_rad, is_direct, phase_events
 from .predictor import filter_ratios, profile, steps_per_cycle
 from .reference import EntryMission, ReferenceTrajectory
 from .state import SkipEntryState, initial_log, updated_log
@@ -103,10 +104,14 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         track_bank_min_rad: smallest bank magnitude (and largest, pi minus it) the second
             entry commands: a lift vector held straight up or down has no lateral component.
         chute_altitude_m: end of guidance.
+        direct: whether the law flies its direct-entry mode (static), resolved by the capsule
+            system from ``entry_mode`` and handed over in the mission.
     """
 
     reference: ReferenceTrajectory
     chute_altitude_m: Scalar
+    # the mode flown, resolved by the capsule system from entry_mode ("auto": from the reach)
+    direct: bool = eqx.field(static=True, default=False)
     k_drag_load: Scalar = param(
         1.0,
         lo=0.0,
@@ -169,6 +174,27 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         hi=1000.0,
         units="km",
         doc="corrector tolerance on the predicted range error",
+    )
+    direct_range_tolerance_m: Scalar = param(
+        1.0,
+        toml="direct_range_tolerance_km",
+        scale=1e3,
+        lo=0.001,
+        hi=1000.0,
+        units="km",
+        doc="corrector tolerance on the predicted range error in the direct-entry mode, which "
+        "has no tracked second entry to remove what the corrector leaves: the packaged capsule "
+        "at -5.9 deg / 2000 km, 8 runs, lands within 4.9 km at 5 km and 1.0 km at 1 km",
+    )
+    direct_final_speed_mps: Scalar = param(
+        1000.0,
+        lo=0.0,
+        hi=1e4,
+        units="m/s",
+        doc="direct-entry mode: below this Earth-relative speed the corrector stops and the "
+        "last solution is flown down to the chute. Near the chute the bank no longer moves the "
+        "predicted range by the corrector's tolerance, so its last cycles failed on runs that "
+        "landed within 1 km (2 of 8 at -5.9 deg / 1600 km)",
     )
     bank_min_rad: Scalar = param(
         0.0,
@@ -359,6 +385,16 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         "within 140 m/s of the reference's; the 9 failed runs of 200 switched 250-1470 m/s "
         "above it, at 60-66 km, after corrector cycles that could not bracket. 1e5 disables it",
     )
+    entry_mode: str = param(
+        "auto",
+        choices=("auto", "skip", "direct"),
+        doc="'skip': the combined law of seed 003 (a first entry, a Kepler phase or an apogee, "
+        "a tracked second entry); 'direct': the same predictor-corrector with a constant "
+        "predicted bank down to the chute, no Kepler phase and no second entry, bank reversals "
+        "inside the crossrange funnel (targets short of the skip's reach); 'auto': 'direct' "
+        "where the target lies inside the nominal vehicle's direct reach (constant-bank "
+        "landings without a skip: gnc_jax.guidance.entry.direct), else 'skip'",
+    )
     n_bracket: int = param(6, lo=1, hi=100, doc="bracketing steps of the corrector")
     n_iter: int = param(6, lo=1, hi=100, doc="regula-falsi iterations of the corrector")
 
@@ -399,14 +435,24 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         return section["kepler_load_g"]
 
     @classmethod
+    def entry_mode_of(cls, section) -> str:
+        """The entry mode ``section`` asks for ("auto", "skip" or "direct")."""
+        return section["entry_mode"]
+
+    @classmethod
     def from_config(cls, section, config, ctx: EntryMission | None = None):
         """The law of a scenario, from the capsule system's :class:`EntryMission` ``ctx``
         (:func:`gnc_jax.systems.capsule.reference.law_mission`): the chute altitude (m),
-        where guidance ends, and the reference designed for the scenario."""
+        where guidance ends, the reference designed for the scenario and the entry mode it
+        was designed for ("auto" resolved by the capsule system)."""
         if ctx is None:
             raise ValueError("the skip-entry law is built with the capsule's EntryMission")
         return from_config(
-            cls, section, reference=ctx.reference, chute_altitude_m=ctx.chute_altitude_m
+            cls,
+            section,
+            reference=ctx.reference,
+            chute_altitude_m=ctx.chute_altitude_m,
+            direct=ctx.entry_mode == "direct",
         )
 
     # ---- the guidance-law protocol ----
@@ -453,8 +499,11 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         bank_offset = jnp.where(
             events.to_track, switch_compensation(self, fv, to_go), state.bank_offset
         )
+        correcting = live & (phase == 1)
+        if is_direct(self):
+            correcting = correcting & (fv.speed_mps > self.direct_final_speed_mps)
         res, did_pc = corrector_cycle(
-            self, state, y, t, fv.speed_mps, ctx, model, pulled, live & (phase == 1)
+            self, state, y, t, fv.speed_mps, ctx, model, pulled, correcting
         )
         sigma_0 = jnp.where(did_pc, res.x, state.sigma_0)
         chi_switch = jnp.where(did_pc, res.aux, state.predicted_crossrange)

@@ -11,11 +11,33 @@ import jax.numpy as jnp
 from ...dynamics.entry import entry_state_from_conditions
 from ...guidance.entry.base import AbstractEntryGuidance, EntryModel
 from ...guidance.entry.cache import reference_for
+from ...guidance.entry.direct import (
+    design_direct,
+    direct_reach,
+    direct_reference,
+    reach_text,
+    scan_direct,
+)
 from ...guidance.entry.nominal import NominalProblem
 from ...guidance.entry.reference import EntryMission, ReferenceTrajectory
 from ...params import from_scenario
+from ...schema import ScenarioError
 from .params import ReferenceDesignParams
 from .simulation import CapsuleSimulation
+
+
+def nominal_problem(config: dict, sim: CapsuleSimulation, switch_load_g: float) -> NominalProblem:
+    """The reference design's problem: the nominal vehicle, entry and target of ``sim``, the
+    switch load (g) and the ``[reference]`` section's end speed of the second-entry profile."""
+    ref = from_scenario(ReferenceDesignParams, config)
+    return NominalProblem(
+        model=EntryModel(sim.vehicle, sim.earth, sim.atmosphere),
+        entry=entry_state_from_conditions(sim.entry, sim.earth),
+        target_fixed=sim.target_fixed,
+        kepler_load_g=jnp.asarray(switch_load_g, dtype=jnp.float64),
+        chute_altitude_m=sim.chute_altitude_m,
+        v_end_mps=jnp.asarray(ref.v_end_mps, dtype=jnp.float64),
+    )
 
 
 def scenario_reference(
@@ -28,14 +50,7 @@ def scenario_reference(
     by a hash of the ``entry``, ``vehicle`` and ``atmosphere`` sections, the switch load and
     the design settings."""
     ref = from_scenario(ReferenceDesignParams, config)
-    problem = NominalProblem(
-        model=EntryModel(sim.vehicle, sim.earth, sim.atmosphere),
-        entry=entry_state_from_conditions(sim.entry, sim.earth),
-        target_fixed=sim.target_fixed,
-        kepler_load_g=jnp.asarray(switch_load_g, dtype=jnp.float64),
-        chute_altitude_m=sim.chute_altitude_m,
-        v_end_mps=jnp.asarray(ref.v_end_mps, dtype=jnp.float64),
-    )
+    problem = nominal_problem(config, sim, switch_load_g)
     # the problem named in file units (the cache file's name: keep it as it is)
     description = {
         "entry": config["entry"],
@@ -57,6 +72,37 @@ def law_mission(
     ``from_config`` (SI units): the chute altitude of ``sim`` and, for a law that tracks a
     reference (whose ``reference_switch_load_g`` is not ``None``), the reference of
     :func:`scenario_reference`."""
-    load = law.reference_switch_load_g(config["guidance"][law.law_name])
-    reference = None if load is None else scenario_reference(config, sim, load)
-    return EntryMission(chute_altitude_m=sim.chute_altitude_m, reference=reference)
+    section = config["guidance"][law.law_name]
+    load = law.reference_switch_load_g(section)
+    if load is None:
+        return EntryMission(chute_altitude_m=sim.chute_altitude_m)
+    reference, mode = mode_reference(config, sim, load, law.entry_mode_of(section))
+    return EntryMission(chute_altitude_m=sim.chute_altitude_m, reference=reference, entry_mode=mode)
+
+
+def mode_reference(config: dict, sim: CapsuleSimulation, switch_load_g: float, mode: str):
+    """The reference of the entry ``mode`` and the mode resolved: "skip" (the designed
+    second-entry reference of :func:`scenario_reference`), "direct" (the constant-bank direct
+    design of :mod:`gnc_jax.guidance.entry.direct`), or "auto": "direct" where the target
+    lies inside the nominal vehicle's direct reach, else "skip" (a skip that cannot reach
+    either is refused with both intervals)."""
+    if mode == "skip":
+        return scenario_reference(config, sim, switch_load_g), "skip"
+    problem = nominal_problem(config, sim, switch_load_g)
+    scan = scan_direct(problem)
+    reach = direct_reach(scan)
+    inside = reach is not None and reach[0] <= 0.0 <= reach[1]
+    if mode == "direct" or inside:
+        try:
+            bank = design_direct(problem, config["entry"], config["vehicle"], scan)
+            return direct_reference(problem, bank, 1e3 * config["entry"]["range_km"]), "direct"
+        except ScenarioError:
+            if mode == "direct":
+                raise
+            # (auto: inside the reach, but no two neighbouring direct landings bracket it)
+    try:
+        return scenario_reference(config, sim, switch_load_g), "skip"
+    except ScenarioError as e:
+        raise ScenarioError(
+            f"{e}; a direct entry reaches {reach_text(reach, config['entry'])}"
+        ) from None
