@@ -139,11 +139,11 @@ def test_the_gpu_cost_is_throughput_plus_sequential_latency(name):
 
 
 def test_bennu_on_a_gpu_is_latency_bound_and_not_refused():
-    # the H100's measured walls: 2,000 runs 6.5-7.2 s, 200,000 runs 25 s; the CPU's model
-    # estimated 26 min and over 24 h for them
+    # the H100's measured walls through the CLI: 2,000 runs 2.61 s, 200,000 runs 19.6 s; the
+    # CPU's model estimated 26 min and over 24 h for them
     scenario = gj.load_scenario("bennu-apn")
     small, large = (gj.estimate_cost(scenario, n, device=H100) for n in (2_000, 200_000))
-    assert 6.5 / 3 < small.seconds < 7.2 * 3 and 25 / 3 < large.seconds < 25 * 3
+    assert 2.61 / 3 < small.seconds < 2.61 * 3 and 19.6 / 3 < large.seconds < 19.6 * 3
     assert small.latency_s / small.seconds > 0.9
     assert "sequential-step latency" in str(small)
     from gnc_jax.study import _checked_cost
@@ -191,11 +191,20 @@ def test_cpu_chunks_are_the_cache_sized_ones():
 
 
 @pytest.mark.parametrize(
-    "name, runs", [("deep-impact-los", 1_000_000), ("bennu-apn", 200_000), ("bennu-apn", 2_000)]
+    "name, runs",
+    [("lunar-skip-entry", 100_000), ("bennu-apn", 200_000), ("bennu-apn", 2_000)],
 )
 def test_a_gpu_runs_what_fits_in_one_chunk(name, runs):
     chunk, cost = plan(name, runs, H100)
     assert chunk == runs, (chunk, str(cost))
+
+
+def test_a_gpu_batch_stops_where_a_larger_one_runs_no_faster():
+    # the H100's best chunk for 1,000,000 deep-impact-los runs was 125,000 (3.84 s; one chunk
+    # of 1,000,000: 5.37 s): 15 kB per run, at most 2 GB per chunk -> 8 equal chunks
+    chunk, _ = plan("deep-impact-los", 1_000_000, H100)
+    assert chunk == 125_000
+    assert chunk * gj.get_system("impactor").run_bytes <= planner.GPU_BATCH_BYTES
 
 
 @pytest.mark.parametrize("memory_gb", [0.05, 1.0, 8.0])
@@ -204,23 +213,25 @@ def test_gpu_chunks_fit_the_device_memory(memory_gb):
     runs = 1_000_000
     chunk, _ = plan("deep-impact-los", runs, device, fraction=0.5)
     run_bytes = gj.get_system("impactor").run_bytes
-    assert chunk * run_bytes <= 0.5 * memory_gb * 1e9
+    limit = min(0.5 * memory_gb * 1e9, planner.GPU_BATCH_BYTES)
+    assert chunk * run_bytes <= limit
     n = math.ceil(runs / chunk)
     assert (chunk - 1) * n < runs  # equal chunks: no fewer would fit
-    assert math.ceil(runs / (n - 1)) * run_bytes > 0.5 * memory_gb * 1e9 if n > 1 else True
+    assert math.ceil(runs / (n - 1)) * run_bytes > limit if n > 1 else True
 
 
 def test_a_long_gpu_study_is_cut_for_progress_only_where_latency_stays_small():
-    runs = 10_000_000  # ~50 s of throughput and 0.35 s latency per chunk: announced
+    # deep-impact-los: 10,000,000 runs (~37 s: announced) already run in chunks of at most
+    # GPU_BATCH_BYTES, each well under PROGRESS_CHUNK_S: no further cut
+    runs = 10_000_000
     chunk, cost = plan("deep-impact-los", runs, H100)
     assert cost.seconds > montecarlo.ANNOUNCE_S
-    n = math.ceil(runs / chunk)
-    assert n > 1
-    assert (n - 1) * cost.latency_s <= planner.LATENCY_SHARE * cost.seconds
-    assert (cost.seconds - cost.latency_s) / n >= planner.PROGRESS_CHUNK_S
-    # bennu: 6.6 s of latency per chunk: a 96 s study is cut in 2, not in 9 chunks of 10 s
+    run_bytes = gj.get_system("impactor").run_bytes
+    assert chunk == math.ceil(runs / math.ceil(runs / int(planner.GPU_BATCH_BYTES / run_bytes)))
+    assert (cost.seconds - cost.latency_s) * chunk / runs < planner.PROGRESS_CHUNK_S
+    # bennu: 2.4 s of latency per chunk: an 88 s study is cut in 4, not in 9 chunks of 10 s
     chunk, cost = plan("bennu-apn", 1_000_000, H100)
-    assert cost.seconds == pytest.approx(96.3, abs=1) and math.ceil(1_000_000 / chunk) == 2
+    assert cost.seconds == pytest.approx(87.8, abs=1) and math.ceil(1_000_000 / chunk) == 4
 
 
 def test_the_chunk_size_asked_for_is_kept_on_a_gpu():

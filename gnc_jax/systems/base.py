@@ -89,9 +89,10 @@ class StepCost(NamedTuple):
     source: str
 
 
-H100_SOURCE = "an H100 80GB (jax 0.11.2), one chunk per study: benchmarks/backend_probe_h100.json"
-"""Where the packaged systems' GPU cost models were measured (a package before the GPU
-planner: re-measure with ``benchmarks/cost_calibration.py --device gpu``)."""
+H100_SOURCE = "an H100 80GB (jax 0.11.2): benchmarks/gpu_acceptance_h100.json"
+"""Where the packaged systems' GPU cost models were measured (``benchmarks/gpu_acceptance.py``,
+the capsule's in ``benchmarks/backend_probe_h100.json``; re-measure with
+``benchmarks/cost_calibration.py --device gpu``)."""
 
 
 class AbstractSystem(abc.ABC):

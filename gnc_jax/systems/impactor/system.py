@@ -255,10 +255,11 @@ class ImpactorSystem(AbstractSystem):
     # per-operation overhead of its ~40 kernels per step, above ~2000 its working set
     # outgrows the 1 MB L2 cache).
     chunk_per_device: ClassVar[int] = 2048
-    # GPU: deep-impact-los on one H100 took 0.36 s for 2,000 runs, 0.60 s for 100,000 and
-    # 5.1 s for 1,000,000 (one chunk each): ~43 us per sequential step plus 0.62 ns per run-step.
+    # GPU: deep-impact-los on one H100 (unfenced loops, scans unrolled 4 times) took 0.14 s for
+    # 1,024 runs, 0.48 s per chunk of 125,000 and 0.98 s per chunk of 250,000: ~17 us per
+    # sequential step plus 0.46 ns per run-step.
     step_costs: ClassVar[dict[str, StepCost]] = {
-        "gpu": StepCost(6.2e-10, 4.3e-5, "deep-impact-los on " + H100_SOURCE)
+        "gpu": StepCost(4.6e-10, 1.7e-5, "deep-impact-los on " + H100_SOURCE)
     }
     # the compiled batch's bytes per run on the CPU (14,980); the H100's peak was 8.0 kB per run
     run_bytes: ClassVar[int] = 15_000

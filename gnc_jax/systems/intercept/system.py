@@ -233,11 +233,12 @@ class InterceptSystem(AbstractSystem):
     }
 
     step_seconds = STEP_SECONDS
-    # GPU: bennu-apn on one H100 took 6.5-7.2 s for 2,000 runs, 7.3-7.5 s for 20,000 and 25 s
-    # for 200,000 (one chunk each): its 91,200 strictly sequential steps cost the same whatever
-    # the batch, 30 us per step of steps_per_run, plus 0.41 ns per run-step.
+    # GPU: bennu-apn on one H100 (unfenced loops, scans unrolled 4 times) took 2.61 s for 2,000
+    # runs and 19.6 s for 200,000 (one chunk each, through the CLI): its strictly sequential
+    # steps cost the same whatever the batch, 11 us per step of steps_per_run, plus 0.39 ns per
+    # run-step.
     step_costs: ClassVar[dict[str, StepCost]] = {
-        "gpu": StepCost(4.1e-10, 3.0e-5, "bennu-apn on " + H100_SOURCE)
+        "gpu": StepCost(3.9e-10, 1.1e-5, "bennu-apn on " + H100_SOURCE)
     }
     run_bytes: ClassVar[int] = 4_500  # the compiled batch's bytes per run on the CPU (4,484)
 
