@@ -150,10 +150,11 @@ class LOSSwitchingCurveGuidance(AbstractImpactorGuidance):
 
     ordered_gains = (("k1", "k2"),)
     schedules = {"k1_schedule": "k1", "k2_schedule": "k2"}  # schedule -> the gain it replaces
+    schedule_breakpoints = "schedule_tgo_s"
 
     @classmethod
     def check(cls, section, config):
-        check_schedules(section, "schedule_tgo_s", cls.schedules, "guidance.los")
+        check_schedules(section, cls.schedule_breakpoints, cls.schedules, "guidance.los")
         k1 = np.asarray(section["k1_schedule"] or [section["k1"]], float)
         k2 = np.asarray(section["k2_schedule"] or [section["k2"]], float)
         k1, k2 = np.broadcast_arrays(k1, k2)
