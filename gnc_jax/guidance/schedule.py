@@ -59,8 +59,8 @@ def check_schedules(
         )
     if np.any(np.diff(b) <= 0.0):
         raise ScenarioError(
-            f"{where}.{breakpoints}: {list(b)} is not strictly increasing; allowed: "
-            "b[0] < b[1] < ..."
+            f"{where}.{breakpoints}: {list(section[breakpoints])} is not strictly increasing; "
+            "allowed: b[0] < b[1] < ..."
         )
     for s in used:
         if len(section[s]) != len(b):
