@@ -146,3 +146,32 @@ def test_a_schedule_is_tuned_knot_by_knot_in_order_from_its_constant_gain():
     np.testing.assert_allclose(param.theta(values), theta, rtol=1e-12)
     with pytest.raises(ScenarioError, match="guidance.los.k1: its schedule k1_schedule is set"):
         resolve_gains(scenario, ["guidance.los.k1"])
+
+
+def test_skip_entry_tracking_gains_scheduled_over_speed_are_the_constant_gains_interpolated():
+    """K(v) of eq. 7 with the tracking multipliers scheduled over speed equals K(v) of the
+    constant law whose multipliers are ``numpy.interp`` of the knots at that speed (bit for
+    bit with equal knots)."""
+    from gnc_jax.guidance.entry.tracking import feedback_gains
+
+    speeds_kmps = [2.0, 4.0, 6.0, 8.0, 10.0]
+    k_range = [2.5, 2.0, 3.0, 3.5, 2.5]
+    k_hdot = [1.0, 1.0, 1.0, 1.0, 1.0]
+    base = gj.load_scenario("lunar-skip-entry")
+    scheduled = base.with_overrides({
+        "guidance.skip_entry.schedule_speed_kmps": speeds_kmps,
+        "guidance.skip_entry.k_range_schedule": k_range,
+        "guidance.skip_entry.k_hdot_schedule": k_hdot,
+    })  # fmt: skip
+    _, constant = gj.build(base)
+    _, law = gj.build(scheduled)
+    for v in (1500.0, 3000.0, 5000.0, 7300.0, 9999.0, 11000.0):
+        got = feedback_gains(law, v)
+        k = float(np.interp(v / 1e3, speeds_kmps, k_range))
+        reference = eqx.tree_at(lambda l: l.k_range, constant, jnp.asarray(k))
+        np.testing.assert_allclose(got, feedback_gains(reference, v), rtol=1e-14, atol=0.0)
+        equal = eqx.tree_at(lambda l: l.k_range_schedule, law, jnp.full(5, 2.5))
+        flat = feedback_gains(eqx.tree_at(lambda l: l.k_hdot_schedule, equal, jnp.full(5, 1.0)), v)
+        np.testing.assert_array_equal(flat, feedback_gains(constant, v))
+    with pytest.raises(ScenarioError, match="guidance.skip_entry.k_range_schedule: 4 values"):
+        scheduled.with_overrides({"guidance.skip_entry.k_range_schedule": k_range[:4]})
