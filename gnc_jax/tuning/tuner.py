@@ -59,7 +59,9 @@ def tune(
 
     Args:
         scenario: a :class:`~gnc_jax.Scenario` or a packaged name / TOML path.
-        params: scenario names of tunable leaves (a list, or comma-separated text).
+        params: scenario names of tunable leaves (a list, or comma-separated text); a
+            schedule (``guidance.los.k1_schedule``) is one parameter per knot, an empty one
+            starting at its constant gain (:func:`~gnc_jax.tuning.with_schedule_starts`).
         objective: built-in terms (:data:`TERMS`, e.g. ``"miss_rms+10*dv_mean"``), a mapping
             ``{term: weight}``, a callable ``fn(outcomes, weights)`` of the per-run outcomes
             (a NamedTuple of arrays, run on the first axis; weights 1 for ``ok`` runs, 0
