@@ -156,16 +156,11 @@ def _monitor(problem, rec, theta, s, steps, monitor):
         rec["heldout_gains"] = gains
 
 
-def _run_es(
-    problem, theta, opt, temps, batch, steps, train_runs, gradient, population, sigma,
-    monitor, callback, seed,
-):  # fmt: skip
-    per_member = max(batch // (2 * population), 1)
-    rng = np.random.default_rng(seed)
+def _population(problem):
+    """The builder of the hard objective of a population of ``theta`` on common runs: the
+    layer above the batch (STYLE: run -> batch -> population), shared by the ES and CMA-ES."""
 
-    def build_population():
-        # a population of gains on common runs: the layer above the batch (STYLE: run ->
-        # batch -> population)
+    def build():
         def population_values(args, thetas, idx, valid):
             return jax.vmap(lambda th: problem.hard(args, problem.param.gains(th), idx, valid)[0])(
                 thetas
@@ -173,10 +168,20 @@ def _run_es(
 
         return population_values
 
+    return build
+
+
+def _run_es(
+    problem, theta, opt, temps, batch, steps, train_runs, gradient, population, sigma,
+    monitor, callback, seed,
+):  # fmt: skip
+    per_member = max(batch // (2 * population), 1)
+    rng = np.random.default_rng(seed)
+
     n = len(theta)
     idx, valid = problem.padded(train_indices(0, per_member, train_runs))
     members = np.zeros((2 * population + 1, n))
-    fn, compile_s = problem.compiled("es", build_population, problem.args, members, idx, valid)
+    fn, compile_s = problem.compiled("es", _population(problem), problem.args, members, idx, valid)
     update = _compiled_update(opt)
     state = opt.init(jnp.asarray(theta))
     history, wall = [], 0.0
@@ -222,17 +227,9 @@ def _run_cma(
     per_member = max(batch // (2 * population), 1)
     n = len(theta)
 
-    def build_population():
-        def population_values(args, thetas, idx, valid):
-            return jax.vmap(lambda th: problem.hard(args, problem.param.gains(th), idx, valid)[0])(
-                thetas
-            )
-
-        return population_values
-
     idx, valid = problem.padded(train_indices(0, per_member, train_runs))
     members = np.zeros((2 * population + 1, n))
-    fn, compile_s = problem.compiled("es", build_population, problem.args, members, idx, valid)
+    fn, compile_s = problem.compiled("es", _population(problem), problem.args, members, idx, valid)
     options = {"popsize": 2 * population, "seed": seed + 1, "verbose": -9}
     es = cma.CMAEvolutionStrategy(np.asarray(theta, float), sigma, options)
     history, wall = [], 0.0
