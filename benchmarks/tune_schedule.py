@@ -4,18 +4,19 @@ reverse-mode gradients through the relaxed switch, the package's antithetic ES a
 
     python benchmarks/tune_schedule.py [--batch 64] [--steps 30] [--heldout 2000]
         [--eval-every 2] [--eval-runs 256] [--methods adam,es,cma] [--population 4]
-        [--setup los|skip-entry]
+        [--check-runs 256] [--setup los|skip-entry]
 
 ``deep-impact-los`` with k1 and k2 scheduled over time to go at 8 breakpoints each (16
 knots), starting from the packaged constant gains (4, 1) at every knot (the same flight as
 the packaged law); ``--setup skip-entry``: ``lunar-skip-entry``'s overall tracking gain
 k_range scheduled over speed at 6 breakpoints, chute-deploy RMS error. Each method:
-``gj.tune`` with the same batch, steps and seed; the hard objective (and the training check)
-on ``--eval-runs`` held-out runs every ``--eval-every`` steps (not timed); the
-final paired comparison against the packaged gains on ``--heldout`` held-out runs with its
-95 % bootstrap interval. The baselines are CMA-ES and the ES: each one's final monitored
-held-out objective is a target, and each method's runs and training wall time (compile
-apart, monitoring not counted) to reach it are printed, as a ratio to the baseline's.
+``gj.tune`` with the same batch, steps and seed (the training check on ``--check-runs``
+runs); the hard objective on ``--eval-runs`` held-out runs every ``--eval-every`` steps
+(not timed); the final paired comparison against the packaged gains on ``--heldout``
+held-out runs with its 95 % bootstrap interval. The baselines are CMA-ES and the ES: each
+one's final monitored held-out objective is a target, and each method's runs and training
+wall time (compile apart, monitoring not counted) to reach it are printed, as a ratio to
+the baseline's.
 """
 
 import argparse
@@ -51,6 +52,7 @@ def main():
     ap.add_argument("--eval-runs", type=int, default=256)
     ap.add_argument("--methods", default="adam,es,cma")
     ap.add_argument("--population", type=int, default=4)
+    ap.add_argument("--check-runs", type=int, default=256)
     ap.add_argument("--setup", choices=tuple(SETUPS), default="los")
     args = ap.parse_args()
     name, field, breakpoints, params, objective = SETUPS[args.setup]
@@ -61,7 +63,7 @@ def main():
         r = gj.tune(
             scenario, params, objective, batch=args.batch, steps=args.steps, seed=0,
             method=method, heldout_runs=args.heldout, eval_every=args.eval_every,
-            eval_runs=args.eval_runs, population=args.population, check_runs=args.eval_runs,
+            eval_runs=args.eval_runs, population=args.population, check_runs=args.check_runs,
         )  # fmt: skip
         results[method] = r
         row = r.heldout["rows"][0]
