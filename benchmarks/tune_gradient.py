@@ -41,7 +41,11 @@ def measure(system_name, mode, runs, short, n_params):
         system.example, overrides=dict(system.test_overrides) if short else {}
     )
     law = system.law_name(scenario.config)
-    params = [n for n in system.tunable_names() if n.startswith(f"guidance.{law}.")]
+    params = [
+        n
+        for n in system.tunable_names()
+        if n.startswith(f"guidance.{law}.") and not isinstance(scenario[n], list)
+    ]  # the constant gains (a schedule's knots are --params's random map)
     problem = tuning.TuningProblem(
         scenario,
         tuning.resolve_gains(scenario, params),

@@ -165,6 +165,11 @@ def test_gradient_free_baseline_spends_the_same_runs():
     es = tune(toy(), "guidance.pn.n", "miss_rms", method="es", population=2, **kw)
     assert [h["runs"] for h in es.history] == [h["runs"] for h in adam.history]
     assert es.history[-1]["gains"] != es.initial  # it moved
+    cma = tune(toy(), "guidance.pn.n", "miss_rms", method="cma", population=2, **kw)
+    assert [h["runs"] for h in cma.history] == [h["runs"] for h in es.history]
+    # generation 0: the same start on the same common runs as the ES's centre
+    assert cma.history[0]["objective"] == es.history[0]["objective"]
+    assert cma.history[-1]["gains"] != cma.initial
 
 
 def test_the_result_is_the_checked_point_with_the_lowest_hard_training_objective():

@@ -182,7 +182,10 @@ def _add_tune(sub) -> None:
         help="override a scenario field before tuning (repeatable)",
     )
     q.add_argument(
-        "--method", choices=("adam", "es"), default="adam", help="adam (gradients) or es"
+        "--method",
+        choices=("adam", "es", "cma"),
+        default="adam",
+        help="adam (gradients), es or cma (CMA-ES: pip install 'gnc_jax[tune]')",
     )
     q.add_argument(
         "--mode",

@@ -29,7 +29,7 @@ The parts, one file each: ``objectives`` (the terms and their sums), ``parametri
 from .evaluation import evaluate_heldout, hard_objectives, heldout_table, paired_interval
 from .objectives import TERMS, Objective, ObjectiveTerm, parse_objective
 from .optimisers import default_optimizer, progress_line
-from .parametrisation import Gain, Reparametrisation, resolve_gains
+from .parametrisation import Gain, Reparametrisation, resolve_gains, with_schedule_starts
 from .problem import HELDOUT_OFFSET, TuningProblem, heldout_indices, train_indices
 from .result import TuneResult, plot_training
 from .tuner import tune
@@ -46,6 +46,7 @@ __all__ = [
     "TuningProblem",
     "parse_objective",
     "resolve_gains",
+    "with_schedule_starts",
     "train_indices",
     "heldout_indices",
     "evaluate_heldout",

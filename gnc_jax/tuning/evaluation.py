@@ -9,7 +9,7 @@ import numpy as np
 
 from ..scenario import Scenario, load_scenario
 from .objectives import _term_label, parse_objective
-from .parametrisation import resolve_gains
+from .parametrisation import resolve_gains, with_schedule_starts
 from .problem import TuningProblem, heldout_indices
 
 
@@ -24,6 +24,7 @@ def hard_objectives(scenario, params, objective, gains, runs: int, seed: int = 0
     held-out runs: a grid check, a sweep or a baseline on the runs :func:`tune` holds out."""
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
+    scenario = with_schedule_starts(scenario, params)
     resolved = resolve_gains(scenario, params)
     problem = TuningProblem(scenario, resolved, parse_objective(objective, scenario), seed)
     return [_hard_objective(problem, g, heldout_indices(runs)) for g in gains]

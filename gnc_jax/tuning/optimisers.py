@@ -21,6 +21,12 @@ at about 11 parameters: forward mode for a law's few gains, reverse mode for sch
 ``2 x population`` members on ``batch // (2 x population)`` common runs, so it simulates the
 same number of runs per step as the gradient tuner (the same budget in runs). ``eval_every``
 records the held-out objective along the way (:meth:`TuneResult.runs_to_reach`).
+
+**CMA-ES baseline** (``method="cma"``): the ``cma`` package's covariance-matrix adaptation
+(an optional dependency: ``pip install gnc_jax[tune]``) in the same ``theta``, ``sigma`` its
+initial step; each generation flies ``2 x population`` candidates and the distribution's mean
+on the same ``batch // (2 x population)`` common runs of the hard logic as the ES, so the
+three methods simulate the same runs per step. The gains of a step are CMA-ES's mean.
 """
 
 import time
@@ -150,16 +156,11 @@ def _monitor(problem, rec, theta, s, steps, monitor):
         rec["heldout_gains"] = gains
 
 
-def _run_es(
-    problem, theta, opt, temps, batch, steps, train_runs, gradient, population, sigma,
-    monitor, callback, seed,
-):  # fmt: skip
-    per_member = max(batch // (2 * population), 1)
-    rng = np.random.default_rng(seed)
+def _population(problem):
+    """The builder of the hard objective of a population of ``theta`` on common runs: the
+    layer above the batch (STYLE: run -> batch -> population), shared by the ES and CMA-ES."""
 
-    def build_population():
-        # a population of gains on common runs: the layer above the batch (STYLE: run ->
-        # batch -> population)
+    def build():
         def population_values(args, thetas, idx, valid):
             return jax.vmap(lambda th: problem.hard(args, problem.param.gains(th), idx, valid)[0])(
                 thetas
@@ -167,10 +168,20 @@ def _run_es(
 
         return population_values
 
+    return build
+
+
+def _run_es(
+    problem, theta, opt, temps, batch, steps, train_runs, gradient, population, sigma,
+    monitor, callback, seed,
+):  # fmt: skip
+    per_member = max(batch // (2 * population), 1)
+    rng = np.random.default_rng(seed)
+
     n = len(theta)
     idx, valid = problem.padded(train_indices(0, per_member, train_runs))
     members = np.zeros((2 * population + 1, n))
-    fn, compile_s = problem.compiled("es", build_population, problem.args, members, idx, valid)
+    fn, compile_s = problem.compiled("es", _population(problem), problem.args, members, idx, valid)
     update = _compiled_update(opt)
     state = opt.init(jnp.asarray(theta))
     history, wall = [], 0.0
@@ -205,3 +216,37 @@ def progress_line(rec: dict, names) -> str:
     if rec.get("heldout") is not None:
         line += f"  held-out {rec['heldout']:.6g}"
     return line + f"  ({rec['wall_s']:.1f} s)"
+
+
+def _run_cma(
+    problem, theta, opt, temps, batch, steps, train_runs, gradient, population, sigma,
+    monitor, callback, seed,
+):  # fmt: skip
+    import cma
+
+    per_member = max(batch // (2 * population), 1)
+    n = len(theta)
+
+    idx, valid = problem.padded(train_indices(0, per_member, train_runs))
+    members = np.zeros((2 * population + 1, n))
+    fn, compile_s = problem.compiled("es", _population(problem), problem.args, members, idx, valid)
+    options = {"popsize": 2 * population, "seed": seed + 1, "verbose": -9}
+    es = cma.CMAEvolutionStrategy(np.asarray(theta, float), sigma, options)
+    history, wall = [], 0.0
+    for s in range(steps):
+        idx, valid = problem.padded(train_indices(s, per_member, train_runs))
+        t0 = time.perf_counter()
+        mean = np.array(es.mean)
+        candidates = es.ask()
+        members = np.concatenate([mean[None], np.asarray(candidates)])
+        values = np.asarray(fn(problem.args, members, idx, valid))
+        # a failed member (no ok run: a non-finite objective) ranks last
+        es.tell(candidates, [float(v) if np.isfinite(v) else 1e300 for v in values[1:]])
+        rec = _record(problem, s, values[0], mean, None, (s + 1) * per_member * 2 * population, 0)
+        wall += time.perf_counter() - t0
+        rec["wall_s"] = wall
+        _monitor(problem, rec, np.array(es.mean), s, steps, monitor)
+        history.append(rec)
+        if callback:
+            callback(rec)
+    return history, np.array(es.mean), compile_s, wall

@@ -6,6 +6,12 @@ unconstrained): a gain with a lower bound ``lo`` is ``lo + exp(theta)`` (a log s
 steps are relative changes); a pair the law needs ordered (``ordered_gains`` of the law class:
 k1 >= k2, trigger_on > trigger_off) is ``smaller = lo + exp(theta_s)``, ``larger = smaller +
 exp(theta_l)``; upper bounds clip.
+
+**Schedules.** A gain schedule (``guidance.los.k1_schedule``: the law's ``schedules``) is
+tuned knot by knot: its name stands for one parameter per breakpoint (``k1_schedule[j]``),
+each on its own log scale, and an ordered pair holds at every knot (k1[j] >= k2[j]). An empty
+schedule starts at its constant gain at every breakpoint (:func:`with_schedule_starts`),
+which flies bit-identically to the constant gain.
 """
 
 import dataclasses
@@ -30,6 +36,49 @@ class Gain:
     si_per_file: float
     lo: float | None
     hi: float | None
+    index: int | None = None  # the knot of a schedule (name: ``field[index]``), else None
+
+    @property
+    def field(self) -> str:
+        """The scenario name of the field (a schedule's, for a knot)."""
+        return self.name.split("[")[0]
+
+    def start(self, scenario: Scenario) -> float:
+        """The gain's value in ``scenario`` (file units)."""
+        value = scenario[self.field]
+        return float(value if self.index is None else value[self.index])
+
+
+def _law_schedules(scenario: Scenario) -> tuple[type, str, dict]:
+    system = scenario.system
+    law_name = system.law_name(scenario.config)
+    cls = system.laws()[law_name]
+    return cls, law_name, dict(getattr(cls, "schedules", {}))
+
+
+def with_schedule_starts(scenario: Scenario, names) -> Scenario:
+    """``scenario`` with each named empty schedule set to its constant gain at every
+    breakpoint (the start of a schedule's tuning; the same flight as the constant gain);
+    :class:`ScenarioError` when the law has no breakpoints set."""
+    if isinstance(names, str):
+        names = [n.strip() for n in names.split(",") if n.strip()]
+    cls, law_name, schedules = _law_schedules(scenario)
+    filled = {}
+    for name in names:
+        field = name.split(".")[-1]
+        if name != f"guidance.{law_name}.{field}" or field not in schedules:
+            continue
+        if len(scenario[name]):
+            continue
+        where = f"guidance.{law_name}.{cls.schedule_breakpoints}"
+        n = len(scenario[where])
+        if n < 2:
+            raise ScenarioError(
+                f"{where}: {n} breakpoints, so {name} has no knots to tune; allowed: at least "
+                "2 increasing breakpoints (--set)"
+            )
+        filled[name] = [float(scenario[f"guidance.{law_name}.{schedules[field]}"])] * n
+    return scenario.with_overrides(filled) if filled else scenario
 
 
 def resolve_gains(scenario: Scenario, names) -> list[Gain]:
@@ -58,16 +107,34 @@ def resolve_gains(scenario: Scenario, names) -> list[Gain]:
             )
         spec = declared_params(system.laws()[law_name])[attribute]
         lo = spec.field.lo
-        value = float(scenario[name])
-        if lo is not None and value <= lo:
+        scheduled = _scheduled_gains(scenario)
+        if name.split(".")[-1] in scheduled:
             raise ScenarioError(
-                f"{name}: {value:g} is at its lower bound {lo:g}, where the log "
-                f"reparametrisation cannot start; allowed: a start value > {lo:g} (--set)"
+                f"{name}: its schedule {scheduled[name.split('.')[-1]]} is set and replaces "
+                f"it; allowed: tune guidance.{law_name}.{scheduled[name.split('.')[-1]]}"
             )
-        gains.append(Gain(name, attribute, float("nan"), lo, spec.field.hi))
+        value = scenario[name]
+        knots = [None] if spec.field.kind != "floats" else list(range(len(value)))
+        if not knots:
+            raise ScenarioError(f"{name}: an empty schedule; allowed: knots to tune (--set)")
+        for j in knots:
+            gain = Gain(name if j is None else f"{name}[{j}]", attribute, float("nan"), lo,
+                        spec.field.hi, j)  # fmt: skip
+            if lo is not None and gain.start(scenario) <= lo:
+                raise ScenarioError(
+                    f"{gain.name}: {gain.start(scenario):g} is at its lower bound {lo:g}, where "
+                    f"the log reparametrisation cannot start; allowed: a start value > {lo:g}"
+                )
+            gains.append(gain)
     if len(set(names)) != len(names):
         raise ScenarioError(f"params: {','.join(names)} names a gain twice; allowed: each once")
     return gains
+
+
+def _scheduled_gains(scenario: Scenario) -> dict[str, str]:
+    """``{gain: its schedule}`` of the law's gains whose schedule is set (non-empty)."""
+    _, law_name, schedules = _law_schedules(scenario)
+    return {g: s for s, g in schedules.items() if len(scenario[f"guidance.{law_name}.{s}"])}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,22 +149,26 @@ class Reparametrisation:
 
     @staticmethod
     def of(scenario: Scenario, gains: list[Gain]) -> "Reparametrisation":
-        system = scenario.system
-        law_name = system.law_name(scenario.config)
-        law_cls = system.laws()[law_name]
-        files = [g.name.split(".")[-1] for g in gains]
+        cls, law_name, schedules = _law_schedules(scenario)
+        gain_of = lambda f: schedules.get(f, f)  # noqa: E731 - a schedule orders as its gain
+        keys = [(gain_of(g.field.split(".")[-1]), g.index) for g in gains]
         below = [-1] * len(gains)
         above_fixed: list = [None] * len(gains)
         below_fixed: list = [None] * len(gains)
-        for larger, smaller in law_cls.ordered_gains:
-            a = files.index(larger) if larger in files else None
-            b = files.index(smaller) if smaller in files else None
-            if a is not None and b is not None:
-                below[a] = b
-            elif a is not None:
-                above_fixed[a] = float(scenario[f"guidance.{law_name}.{smaller}"])
-            elif b is not None:
-                below_fixed[b] = float(scenario[f"guidance.{law_name}.{larger}"])
+        for larger, smaller in cls.ordered_gains:
+            for i, (base, j) in enumerate(keys):
+                other = smaller if base == larger else larger if base == smaller else None
+                if other is None:
+                    continue
+                partner = [m for m, k in enumerate(keys) if k[0] == other and k[1] in (j, None)]
+                if partner and base == larger:
+                    below[i] = partner[0]
+                elif not partner:
+                    fixed = _effective(scenario, law_name, schedules, other, j)
+                    if base == larger:
+                        above_fixed[i] = max(fixed)
+                    else:
+                        below_fixed[i] = min(fixed)
         lo = tuple(-math.inf if g.lo is None else g.lo for g in gains)
         hi = tuple(math.inf if g.hi is None else g.hi for g in gains)
         return Reparametrisation(lo, hi, tuple(below), tuple(above_fixed), tuple(below_fixed))
@@ -153,3 +224,13 @@ class Reparametrisation:
                 "values inside the law's constraints"
             )
         return th
+
+
+def _effective(scenario, law_name, schedules, gain, knot) -> list[float]:
+    """The values the law flies for ``gain`` (file name): its schedule's knot ``knot`` (all
+    knots for ``None``) when the schedule is set, else the constant gain."""
+    schedule = {g: s for s, g in schedules.items()}.get(gain)
+    values = scenario[f"guidance.{law_name}.{schedule}"] if schedule else []
+    if len(values):
+        return [float(v) for v in (values if knot is None else [values[knot]])]
+    return [float(scenario[f"guidance.{law_name}.{gain}"])]

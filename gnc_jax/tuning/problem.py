@@ -30,9 +30,9 @@ def _si_factors(scenario: Scenario, gains: list[Gain], law) -> list[float]:
     """SI leaf / file value of each gain (all conversions of tunable gains are linear)."""
     out = []
     for g in gains:
-        file_value = float(scenario[g.name])
-        si = float(getattr(law, g.attribute))
-        out.append(si / file_value)
+        leaf = getattr(law, g.attribute)
+        si = float(leaf if g.index is None else leaf[g.index])
+        out.append(si / g.start(scenario))
     return out
 
 
@@ -113,13 +113,14 @@ class TuningProblem:
         return executable, time.perf_counter() - t0
 
     def law_at(self, law, gains_file):
-        values = tuple(
-            jnp.asarray(gains_file[i] * g.si_per_file, dtype=jnp.float64)
-            for i, g in enumerate(self.gains)
-        )
-        return eqx.tree_at(
-            lambda l: tuple(getattr(l, g.attribute) for g in self.gains), law, values
-        )
+        """``law`` with the gains ``gains_file`` (file units; a schedule's knots together)."""
+        groups: dict[str, list] = {}
+        for i, g in enumerate(self.gains):
+            groups.setdefault(g.attribute, []).append(
+                jnp.asarray(gains_file[i] * g.si_per_file, dtype=jnp.float64)
+            )
+        values = tuple(jnp.stack(v) if _is_schedule(law, a) else v[0] for a, v in groups.items())
+        return eqx.tree_at(lambda l: tuple(getattr(l, a) for a in groups), law, values)
 
     def padded(self, indices, size: int | None = None):
         """Indices padded to ``size`` (default: a whole number per device) by repeating them,
@@ -156,6 +157,10 @@ class TuningProblem:
     def hard_outcomes(self, gains_file, indices):
         fn = self.jitted("hard", lambda: self.hard)
         return fn(self.args, jnp.asarray(gains_file), indices, jnp.ones(len(indices)))[1]
+
+
+def _is_schedule(law, attribute) -> bool:
+    return jnp.ndim(getattr(law, attribute)) == 1
 
 
 _JITTED: dict = {}

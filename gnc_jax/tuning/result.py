@@ -104,7 +104,10 @@ def plot_training(result: TuneResult, path) -> None:
 
     plt = pyplot()
     steps = [h["step"] for h in result.history]  # the gains and objective before its update
-    n = len(result.names)
+    fields: dict[str, list[int]] = {}  # a schedule's knots share an axis
+    for i, name in enumerate(result.names):
+        fields.setdefault(name.split("[")[0], []).append(i)
+    n = len(fields)
     fig, axes = plt.subplots(n + 1, 1, figsize=(6.4, 2.0 * (n + 1)), sharex=True)
     axes[0].plot(steps, [h["objective"] for h in result.history], label="training batch")
     relaxed = any(h.get("temperature") is not None for h in result.history)
@@ -128,9 +131,12 @@ def plot_training(result: TuneResult, path) -> None:
             ax.axvline(selected + 1, color="0.6", lw=0.8, ls="--")
     axes[0].set_ylabel("objective")
     axes[0].set_title(f"{result.scenario.name}: {result.objective} ({result.method})", fontsize=9)
-    for i, name in enumerate(result.names):
-        axes[i + 1].plot(steps, [h["gains"][i] for h in result.history])
-        axes[i + 1].set_ylabel(name.split(".")[-1])
+    for ax, (field, members) in zip(axes[1:], fields.items(), strict=True):
+        for i in members:
+            ax.plot(steps, [h["gains"][i] for h in result.history], lw=0.8)
+        ax.set_ylabel(
+            field.split(".")[-1] + (f" ({len(members)} knots)" if len(members) > 1 else "")
+        )
     axes[-1].set_xlabel("step")
     fig.savefig(path, dpi=120, bbox_inches="tight")
     plt.close(fig)

@@ -2,6 +2,7 @@
 the held-out evaluation of the result."""
 
 import dataclasses
+import importlib.util
 from collections.abc import Callable
 
 import jax.numpy as jnp
@@ -11,8 +12,15 @@ from ..backend import placement, select
 from ..scenario import Scenario, ScenarioError, load_scenario
 from .evaluation import _hard_objective, evaluate_heldout
 from .objectives import parse_objective
-from .optimisers import _run_adam, _run_es, _temperatures, default_optimizer, gradient_mode
-from .parametrisation import resolve_gains
+from .optimisers import (
+    _run_adam,
+    _run_cma,
+    _run_es,
+    _temperatures,
+    default_optimizer,
+    gradient_mode,
+)
+from .parametrisation import resolve_gains, with_schedule_starts
 from .problem import HELDOUT_OFFSET, TuningProblem
 from .result import TuneResult
 
@@ -51,14 +59,17 @@ def tune(
 
     Args:
         scenario: a :class:`~gnc_jax.Scenario` or a packaged name / TOML path.
-        params: scenario names of tunable leaves (a list, or comma-separated text).
+        params: scenario names of tunable leaves (a list, or comma-separated text); a
+            schedule (``guidance.los.k1_schedule``) is one parameter per knot, an empty one
+            starting at its constant gain (:func:`~gnc_jax.tuning.with_schedule_starts`).
         objective: built-in terms (:data:`TERMS`, e.g. ``"miss_rms+10*dv_mean"``), a mapping
             ``{term: weight}``, a callable ``fn(outcomes, weights)`` of the per-run outcomes
             (a NamedTuple of arrays, run on the first axis; weights 1 for ``ok`` runs, 0
             else), or ``None``: the system's ``smooth_objective``.
         batch: runs per step; steps: optimiser steps; seed: root seed of the run keys.
-        method: ``"adam"`` (gradients through the relaxed laws) or ``"es"`` (gradient-free
-            antithetic evolution strategy on the hard logic, same runs per step).
+        method: ``"adam"`` (gradients through the relaxed laws), ``"es"`` (gradient-free
+            antithetic evolution strategy on the hard logic, same runs per step) or
+            ``"cma"`` (CMA-ES from the ``cma`` package, hard logic, same runs per step).
         learning_rate: of the default optimiser (:func:`default_optimizer`), in theta units
             (log of the gains: 0.1 is a 10 % change); optimizer: any optax transformation.
         temperature: relaxation temperature ``(start, end)`` annealed geometrically, or one
@@ -72,7 +83,7 @@ def tune(
             with the parameters) or ``"auto"``: reverse from
             :data:`~gnc_jax.tuning.optimisers.REVERSE_FROM` parameters on, else forward.
         population, sigma: antithetic pairs per generation and the perturbation in theta
-            (``method="es"``).
+            (``method="es"``; for ``"cma"``: ``2 x population`` candidates, initial step).
         check_runs, check_every: every ``check_every`` steps (default: an eighth of the
             steps) the hard objective of the gains on the first ``check_runs`` training runs;
             the result is the checked gains (or the start) where it is lowest
@@ -93,17 +104,18 @@ def tune(
         batch, steps, seed, method, gradient, train_runs, heldout_runs, eval_every, eval_runs,
         population, check_runs, check_every,
     )  # fmt: skip
+    scenario = with_schedule_starts(scenario, params)
     gains = resolve_gains(scenario, params)
     objective_ = parse_objective(objective, scenario)
     backend = select(device)
     with placement(backend):  # the gains, the runs and the optimiser on that platform
         problem = TuningProblem(scenario, gains, objective_, seed, backend)
         names = [g.name for g in gains]
-        initial = [float(scenario[n]) for n in names]
+        initial = [g.start(scenario) for g in gains]
         theta0 = problem.param.theta(initial)
         opt = optimizer or default_optimizer(learning_rate, steps)
         temps = _temperatures(problem, temperature, steps)
-        run = _run_adam if method == "adam" else _run_es
+        run = {"adam": _run_adam, "es": _run_es, "cma": _run_cma}[method]
         check_indices = np.arange(min(check_runs, train_runs))
         monitor = dict(
             eval_every=eval_every,
@@ -121,7 +133,7 @@ def tune(
         check = None
         if check_runs:
             check, tuned = _training_check(problem, initial, check_indices, history)
-        tuned_scenario = _with_gains(scenario, names, tuned)
+        tuned_scenario = _with_gains(scenario, gains, tuned)
         heldout = (
             evaluate_heldout(problem, initial, tuned, heldout_runs, confidence=confidence)
             if heldout_runs
@@ -153,8 +165,13 @@ def _checked_sizes(
             raise ScenarioError(f"{name}: {value!r}; allowed: an integer >= {least}")
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**32:
         raise ScenarioError(f"seed: {seed!r}; allowed: an integer in [0, 2^32)")
-    if method not in ("adam", "es"):
-        raise ScenarioError(f"method: {method!r}; allowed: adam, es")
+    if method not in ("adam", "es", "cma"):
+        raise ScenarioError(f"method: {method!r}; allowed: adam, es, cma")
+    if method == "cma" and importlib.util.find_spec("cma") is None:
+        raise ScenarioError(
+            "method: 'cma' needs the cma package, not installed; allowed: adam, es, or cma "
+            "after pip install 'gnc_jax[tune]'"
+        )
     if gradient not in ("auto", "forward", "reverse"):
         raise ScenarioError(f"gradient: {gradient!r}; allowed: auto, forward, reverse")
     train_runs = batch * steps if train_runs is None else train_runs
@@ -183,8 +200,15 @@ def _training_check(problem, initial, check_indices, history) -> tuple[dict, lis
     return check, list(best[2])
 
 
-def _with_gains(scenario: Scenario, names, values) -> Scenario:
-    tuned = scenario.with_overrides(dict(zip(names, values, strict=True)))
+def _with_gains(scenario: Scenario, gains, values) -> Scenario:
+    fields: dict = {}
+    for g, v in zip(gains, values, strict=True):
+        if g.index is None:
+            fields[g.field] = v
+        else:
+            fields.setdefault(g.field, []).append(v)
+    tuned = scenario.with_overrides(fields)
+    names = [g.name for g in gains]
     return dataclasses.replace(
         tuned,
         paper={},  # the published numbers are for the paper's gains, not these

@@ -49,7 +49,7 @@ import math
 import equinox as eqx
 import jax.numpy as jnp
 
-from ..._types import Scalar
+from ..._types import Array, Float, Scalar
 from ...dynamics.entry import G0
 from ...geometry.sphere import (
     along_track_to_go,
@@ -60,6 +60,7 @@ from ...geometry.sphere import (
 from ...params import from_config, param, si_value
 from ...schema import ScenarioError
 from ..base import register_law
+from ..schedule import check_schedules
 from .base import (
     AbstractEntryGuidance,
     EntryGuidanceContext,
@@ -77,6 +78,19 @@ from .tracking import switch_compensation, track
 __all__ = ["SkipEntryGuidance", "SkipEntryState"]
 
 DEG = math.pi / 180.0  # math.radians(x) is x * DEG to the last bit
+
+
+TRACKING_GAINS = ("k_drag_load", "k_hdot", "k_range", "k_range_rate")
+
+
+def _speed_schedule(gain: str):
+    return param(
+        [],
+        lo=0.0,
+        hi=100.0,
+        doc=f"{gain} at the speeds schedule_speed_kmps, linear between; [] = the constant {gain}",
+        tunable=True,
+    )
 
 
 @register_law("skip_entry")
@@ -139,6 +153,18 @@ class SkipEntryGuidance(AbstractEntryGuidance):
         hi=100.0,
         doc="eq. 7: weight of the range-rate term of the predicted range",
         tunable=True,
+    )
+    k_drag_load_schedule: Float[Array, " n"] = _speed_schedule("k_drag_load")
+    k_hdot_schedule: Float[Array, " n"] = _speed_schedule("k_hdot")
+    k_range_schedule: Float[Array, " n"] = _speed_schedule("k_range")
+    k_range_rate_schedule: Float[Array, " n"] = _speed_schedule("k_range_rate")
+    schedule_speed_mps: Float[Array, " n"] = param(
+        [],
+        toml="schedule_speed_kmps",
+        scale=1e3,
+        lo=0.0,
+        units="km/s",
+        doc="speed breakpoints of the tracking gains' schedules, increasing",
     )
     ng0_g: Scalar = param(
         0.1, lo=0.0, lo_open=True, hi=5.0, units="g", doc="load that ends the attitude hold"
@@ -398,8 +424,12 @@ class SkipEntryGuidance(AbstractEntryGuidance):
     n_bracket: int = param(6, lo=1, hi=100, doc="bracketing steps of the corrector")
     n_iter: int = param(6, lo=1, hi=100, doc="regula-falsi iterations of the corrector")
 
+    schedules = {f"{g}_schedule": g for g in TRACKING_GAINS}  # schedule -> the gain it replaces
+    schedule_breakpoints = "schedule_speed_kmps"
+
     @classmethod
     def check(cls, section, config):
+        check_schedules(section, cls.schedule_breakpoints, cls.schedules, "guidance.skip_entry")
         if section["bank_min_deg"] >= section["bank_max_deg"]:
             raise ScenarioError(
                 "guidance.skip_entry.bank_min_deg: must be < guidance.skip_entry.bank_max_deg"

@@ -12,6 +12,7 @@ switch point, by eqs. 16-17 (switch-point compensation). Each function takes the
 import jax.numpy as jnp
 
 from ..._types import Scalar
+from ..schedule import scheduled
 from .base import FlightVariables
 
 
@@ -30,17 +31,23 @@ def feedback_gains(law, speed):
     ΔR = dR/dN ΔN_gx + dR/dḢ ΔḢ - t_go ΔṠ, is compared with the range to go deviation ΔS,
     and the difference is removed with cos sigma through dR/dcos. The four leaves
     ``k_range`` (overall gain on ΔS - ΔR) and ``k_drag_load``, ``k_hdot``, ``k_range_rate``
-    (weights of the predicted-range terms) are dimensionless multipliers (1 = nominal).
+    (weights of the predicted-range terms) are dimensionless multipliers (1 = nominal), each
+    constant or scheduled with speed (``<gain>_schedule`` at ``schedule_speed_kmps``).
     """
     f_drag, f_hdot, f_cos, t_go = law.reference.sensitivities(speed)
     f_cos = jnp.maximum(f_cos, 1.0e3)  # no authority left near the chute: bounded gains
-    k = law.k_range / f_cos
+    b = law.schedule_speed_mps
+    k_range = scheduled(law.k_range, law.k_range_schedule, b, speed)
+    k_drag_load = scheduled(law.k_drag_load, law.k_drag_load_schedule, b, speed)
+    k_hdot = scheduled(law.k_hdot, law.k_hdot_schedule, b, speed)
+    k_range_rate = scheduled(law.k_range_rate, law.k_range_rate_schedule, b, speed)
+    k = k_range / f_cos
     return jnp.stack(
         [
-            -k * law.k_drag_load * f_drag,
-            -k * law.k_hdot * f_hdot,
+            -k * k_drag_load * f_drag,
+            -k * k_hdot * f_hdot,
             k,
-            k * law.k_range_rate * t_go,
+            k * k_range_rate * t_go,
         ]
     )
 

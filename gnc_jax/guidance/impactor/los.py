@@ -12,14 +12,16 @@ from typing import NamedTuple
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 
 from ..._numerics import cross3, dot3, norm3, safe_norm, sub3
-from ..._types import Scalar
+from ..._types import Array, Float, Scalar
 from ...geometry.ellipse import b_plane_position_covariance, mean_position_error
 from ...geometry.los import los_rate, range_rate, zero_effort_miss
 from ...params import param
 from ...schema import ScenarioError
 from ..base import EngineCommand, register_law, safe_unit
+from ..schedule import check_schedules, scheduled
 from ..trigger import schmitt_trigger
 from .base import AbstractImpactorGuidance, ImpactorGuidanceContext
 
@@ -119,23 +121,61 @@ class LOSSwitchingCurveGuidance(AbstractImpactorGuidance):
         doc="shut-off rho_min = k2 sqrt(E^2+F^2); k2 <= k1",
         tunable=True,
     )
+    k1_schedule: Float[Array, " n"] = param(
+        [],
+        lo=0.0,
+        lo_open=True,
+        hi=100.0,
+        doc="k1 at the breakpoints schedule_tgo_s, linear between; [] = the constant k1",
+        tunable=True,
+    )
+    k2_schedule: Float[Array, " n"] = param(
+        [],
+        lo=0.0,
+        lo_open=True,
+        hi=100.0,
+        doc="k2 at the breakpoints schedule_tgo_s, linear between; [] = the constant k2",
+        tunable=True,
+    )
+    schedule_tgo_s: Float[Array, " n"] = param(
+        [],
+        lo=0.0,
+        units="s",
+        doc="time-to-go breakpoints (rho / |v|) of k1_schedule and k2_schedule, increasing",
+    )
     temperature: Scalar = param(
         0.05, lo=0.0, lo_open=True, hi=10.0, doc="temperature of the relaxed switch (gradients)"
     )
     relaxed: bool = eqx.field(static=True, default=False)
 
     ordered_gains = (("k1", "k2"),)
+    schedules = {"k1_schedule": "k1", "k2_schedule": "k2"}  # schedule -> the gain it replaces
+    schedule_breakpoints = "schedule_tgo_s"
 
     @classmethod
     def check(cls, section, config):
-        if section["k2"] > section["k1"]:
+        check_schedules(section, cls.schedule_breakpoints, cls.schedules, "guidance.los")
+        k1 = np.asarray(section["k1_schedule"] or [section["k1"]], float)
+        k2 = np.asarray(section["k2_schedule"] or [section["k2"]], float)
+        k1, k2 = np.broadcast_arrays(k1, k2)
+        if np.any(k2 > k1):
+            i = int(np.argmax(k2 > k1))
+            name = "k2_schedule" if section["k2_schedule"] else "k2"
             raise ScenarioError(
-                f"guidance.los.k2: {section['k2']:g} > k1 = {section['k1']:g}; "
-                "allowed: 0 < k2 <= k1"
+                f"guidance.los.{name}: {k2[i]:g} > k1 = {k1[i]:g} (breakpoint {i}); "
+                "allowed: 0 < k2 <= k1 (at every breakpoint of a schedule)"
             )
 
+    def gains_at(self, t_go):
+        """``(k1, k2)`` at time to go ``t_go`` (s): the schedules, or the constant gains."""
+        k1 = scheduled(self.k1, self.k1_schedule, self.schedule_tgo_s, t_go)
+        k2 = scheduled(self.k2, self.k2_schedule, self.schedule_tgo_s, t_go)
+        return k1, k2
+
     def describe(self) -> str:
-        return f"LOS switching curves, k1 = {float(self.k1):g}, k2 = {float(self.k2):g}"
+        k1 = "scheduled" if self.k1_schedule.shape[0] else f"{float(self.k1):g}"
+        k2 = "scheduled" if self.k2_schedule.shape[0] else f"{float(self.k2):g}"
+        return f"LOS switching curves, k1 = {k1}, k2 = {k2}"
 
     def state_curves(self, state_trace) -> dict:
         """|omega| against its switching curves (seed 000 Fig. 3), rad/s."""
@@ -162,13 +202,14 @@ class LOSSwitchingCurveGuidance(AbstractImpactorGuidance):
         rho_n = norm3(rho)
         rdot = range_rate(rho, rho_dot)
         omega = norm3(los_rate(rho, rho_dot))
-        rho_close, rho_open = miss_limits(self.k1, self.k2, state.sigma_b_m, rho_n, nav, ctx)
+        k1, k2 = self.gains_at(rho_n / norm3(nav.v))  # t_go as the error ellipse's (eq. 9)
+        rho_close, rho_open = miss_limits(k1, k2, state.sigma_b_m, rho_n, nav, ctx)
         w_open = switching_curve(rho_n, rdot, rho_open)
         w_close = switching_curve(rho_n, rdot, rho_close)
         if self.relaxed:
             on = schmitt_trigger(omega, state.engine_on, w_open, w_close, self.temperature)
         else:
-            on = _hard_switch(rho, rho_dot, state, nav, self.k1, self.k2, ctx)
+            on = _hard_switch(rho, rho_dot, state, nav, k1, k2, ctx)
         on = jnp.where(t < ctx.cutoff_time_s, on, 0.0)
         # Eq. 19 up to sign: the zero-effort-miss direction -rho_dot x (rho_dot x rho) points
         # from the impactor to the closest-approach offset, so thrusting along it reduces |omega|.
