@@ -175,7 +175,8 @@ def plan_chunk(
 
 def _device_chunk(system, runs, backend, n_dev, cost, announce, max_memory_fraction) -> int:
     """A GPU's default chunk: all runs that fit ``max_memory_fraction`` of each device's
-    memory and ``GPU_BATCH_BYTES``, in equal chunks, cut for a progress bar only where the latency it adds is under ``LATENCY_SHARE``."""
+    memory and ``GPU_BATCH_BYTES``, cut for a progress bar only where the latency it adds is
+    under ``LATENCY_SHARE``."""
     # run_bytes is the CPU executable's figure (deep-impact-los: 15 kB per run, the H100's
     # peak 8 kB); the GPU executable's own figure is checked once it is compiled
     fits = min(memory_limit(backend, max_memory_fraction), GPU_BATCH_BYTES) / system.run_bytes
