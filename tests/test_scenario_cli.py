@@ -308,3 +308,24 @@ def test_a_study_whose_every_run_failed_exits_3(tmp_path, capsys, monkeypatch):
     assert summary["failed"] == 4 and summary["failed_by_status"] == {"nan": 4}
     assert summary["statistics"].startswith("none: no run is ok")  # not NaN statistics
     assert "miss_rms_m" not in summary
+
+
+def test_output_piped_to_a_reader_that_stops_is_no_error(monkeypatch, capsys):
+    # `gnc-jax list --fields | head -1`: the reader closes the pipe; the command ends quietly
+    def closed(args):
+        raise BrokenPipeError(32, "Broken pipe")
+
+    parser = cli.build_parser()
+    args = parser.parse_args(["list"])
+    monkeypatch.setattr(cli, "build_parser", lambda: _Fixed(args, closed))
+    assert cli.main(["list"]) == 0
+    assert "internal error" not in capsys.readouterr().err
+
+
+class _Fixed:
+    def __init__(self, args, func):
+        self.args, self.func = args, func
+
+    def parse_args(self, argv):
+        self.args.func = self.func
+        return self.args

@@ -45,6 +45,12 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("gnc-jax: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the output was piped to a reader that stopped (e.g. `| head`)
+        try:  # Python's own flush at exit would fail again on the closed pipe
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        except (OSError, ValueError):
+            pass
+        return 0
     except Exception as e:  # a bug: one line, the traceback on request
         if os.environ.get(DEBUG_ENV):
             raise
