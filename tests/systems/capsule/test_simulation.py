@@ -119,11 +119,17 @@ def test_downrange_gradient_wrt_tracking_gains_matches_finite_differences(
 
     g0 = jnp.stack([getattr(law, n) for n in names])  # the scenario's defaults
     runs = jnp.arange(n_runs)
-    jac = np.asarray(jax.jit(jax.vmap(jax.jacfwd(downrange), in_axes=(None, 0)))(g0, runs))
     steps = np.array([1e-6, 1e-7])
     offsets = np.concatenate([np.eye(n_gains) * h * s for h in steps for s in (1.0, -1.0)])
-    f = jax.jit(jax.vmap(jax.vmap(downrange, in_axes=(0, None)), in_axes=(None, 0)))
-    vals = np.asarray(f(g0 + jnp.asarray(offsets), runs)).reshape(n_runs, 2, 2, n_gains)
+    # One program, (gains, direction) pairs x runs: the derivative along each unit direction at
+    # the defaults, and the values at the offset gains (their tangents unused).
+    gains = jnp.concatenate([jnp.tile(g0, (n_gains, 1)), g0 + jnp.asarray(offsets)])
+    directions = jnp.concatenate([jnp.eye(n_gains), jnp.zeros_like(offsets)])
+    pushed = jax.vmap(lambda g, d, i: jax.jvp(lambda g: downrange(g, i), (g,), (d,)))
+    f = jax.jit(jax.vmap(lambda i: pushed(gains, directions, jnp.full(len(gains), i))))
+    vals, tangents = (np.asarray(a) for a in f(runs))  # (run, pair)
+    jac = tangents[:, :n_gains]  # (run, gain)
+    vals = vals[:, n_gains:].reshape(n_runs, 2, 2, n_gains)
     fd = (vals[:, :, 0] - vals[:, :, 1]) / (2 * steps[None, :, None])  # (run, step, gain)
     scale = np.abs(fd[:, 1]).max(axis=1, keepdims=True) + 0.1
     smooth = (np.abs(fd[:, 0] - fd[:, 1]) / scale).max(axis=1) < 1e-3
