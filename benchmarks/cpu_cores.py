@@ -96,10 +96,12 @@ def gnc_row(cores, runs, chunk=None, timeout=300.0) -> dict:
     return _result(_spawn(code, cores, env), timeout)
 
 
-def gnc_processes(cores, runs_each, timeout=300.0) -> dict:
+def gnc_processes(cores, runs_each, chunk=None, timeout=300.0) -> dict:
     """One single-device process per core, timed from a common start."""
     with tempfile.TemporaryDirectory() as sync:
-        code = _GNC.format(root=str(ROOT), scenario=SCENARIO, runs=runs_each, chunk=None, sync=sync)
+        code = _GNC.format(
+            root=str(ROOT), scenario=SCENARIO, runs=runs_each, chunk=chunk, sync=sync
+        )
         env = {"GNC_JAX_HOST_DEVICES": "1"}
         procs = [_spawn(code, [c], env) for c in cores]
         t0 = time.time()
@@ -121,9 +123,30 @@ def numba_row(cores, runs, timeout=300.0) -> dict:
     return _result(_spawn(code, cores, {"NUMBA_NUM_THREADS": str(len(cores))}), timeout)
 
 
-def run(cores: int, per_core: int) -> dict:
+def run(cores: int, per_core: int, chunks: list[int] | None = None) -> dict:
     all_cores = sorted(os.sched_getaffinity(0))[:cores]
     n = len(all_cores)
+    if chunks:  # per-device chunk sweep: one core against all cores, same chunk
+        cases = []
+        for c in chunks:
+            cases += [
+                (
+                    f"gnc_jax 1 device, chunk {c}",
+                    1,
+                    lambda c=c: gnc_row(all_cores[:1], per_core, c),
+                ),
+                (
+                    f"gnc_jax {n} devices, chunk {c}/device",
+                    n,
+                    lambda c=c: gnc_row(all_cores, n * per_core, n * c),
+                ),
+                (
+                    f"gnc_jax {n} processes, chunk {c}",
+                    n,
+                    lambda c=c: gnc_processes(all_cores, per_core, c),
+                ),
+            ]
+        return _rows(cases, per_core, n, sweep=True)
     cases = [
         ("gnc_jax 1 device", 1, lambda: gnc_row(all_cores[:1], per_core)),
         (f"gnc_jax {n} devices", n, lambda: gnc_row(all_cores, n * per_core)),
@@ -136,6 +159,10 @@ def run(cores: int, per_core: int) -> dict:
         ("numba 1 thread", 1, lambda: numba_row(all_cores[:1], per_core)),
         (f"numba {n} threads", n, lambda: numba_row(all_cores, n * per_core)),
     ]
+    return _rows(cases, per_core, n)
+
+
+def _rows(cases, per_core, n, sweep=False) -> dict:
     rows = []
     for name, used, case in cases:
         r = case()
@@ -145,6 +172,13 @@ def run(cores: int, per_core: int) -> dict:
             r["per_core_per_s"] = round(r["per_s"] / used, 1)
         rows.append(r)
         print(json.dumps(r), flush=True)
+    if sweep:  # each chunk's many-core rows against its own one-device row
+        for i in range(0, len(rows), 3):
+            ref = rows[i].get("per_core_per_s")
+            for r in rows[i : i + 3]:
+                if ref and "per_core_per_s" in r:
+                    r["efficiency"] = round(r["per_core_per_s"] / ref, 3)
+        return dict(scenario=SCENARIO, cores=n, per_core=per_core, rows=rows)
     one = {k: next(r for r in rows if r["name"].startswith(k)) for k in ("gnc_jax", "numba")}
     for r in rows:
         ref = one["numba" if r["name"].startswith("numba") else "gnc_jax"]
@@ -163,8 +197,14 @@ def main() -> None:
     p.add_argument("--per-core", type=int, default=4000)
     p.add_argument("--out", default=None)
     p.add_argument("--quick", action="store_true", help="200 runs per core")
+    p.add_argument(
+        "--chunks",
+        default="",
+        help="comma-separated runs per device: sweep the chunk on 1 core, N devices, N processes",
+    )
     args = p.parse_args()
-    result = run(args.cores, 200 if args.quick else args.per_core)
+    chunks = [int(c) for c in args.chunks.split(",") if c]
+    result = run(args.cores, 200 if args.quick else args.per_core, chunks)
     cols = ("name", "runs", "wall_s", "per_s", "per_core_per_s", "efficiency", "vs_numba_n")
     print("| " + " | ".join(cols) + " |\n|" + "---|" * len(cols))
     for r in result["rows"]:
