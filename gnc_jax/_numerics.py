@@ -163,9 +163,12 @@ _ACCELERATOR_SHAPE = LoopShape(fence=False, unroll=4)
 _LOOP_SHAPE: contextvars.ContextVar = contextvars.ContextVar("loop_shape", default=None)
 
 
-def for_platform(platform: str) -> LoopShape:
-    """The default :class:`LoopShape` of a JAX platform (``"cpu"``, ``"gpu"``, ``"cuda"``, ...)."""
-    return _PLATFORM_SHAPES.get(platform, _ACCELERATOR_SHAPE)
+def for_platform(platform: str, system=None) -> LoopShape:
+    """The default :class:`LoopShape` of a JAX platform (``"cpu"``, ``"gpu"``, ``"cuda"``, ...):
+    on an accelerator, ``system.accelerator_loop_shape`` where the system declares one."""
+    if platform in _PLATFORM_SHAPES:
+        return _PLATFORM_SHAPES[platform]
+    return getattr(system, "accelerator_loop_shape", None) or _ACCELERATOR_SHAPE
 
 
 def loop_shape() -> LoopShape:

@@ -16,7 +16,7 @@ from gnc_jax._numerics import (
     using_loop_shape,
 )
 
-ACCELERATOR = LoopShape(fence=False, unroll=4)
+ACCELERATOR = LoopShape(fence=False, unroll=4)  # the accelerators' default
 
 
 def example(name):
@@ -32,7 +32,7 @@ def test_accelerator_layout_on_cpu_matches_within_batch_tolerance(name):
     assert name in gj.systems()
     scenario = example(name)
     cpu = gj.run_study(scenario, runs=3, seed=3, progress=False, n_devices=1)
-    with using_loop_shape(ACCELERATOR):
+    with using_loop_shape(for_platform("gpu", gj.get_system(name))):  # what a GPU compiles
         acc = gj.run_study(scenario, runs=3, seed=3, progress=False, n_devices=1)
     assert acc.compile_s > 0.0, "the forced layout must compile its own program"
     assert cpu.summary()["failed"] == 0, cpu.summary()["failed_by_status"]
@@ -48,6 +48,11 @@ def test_accelerator_layout_on_cpu_matches_within_batch_tolerance(name):
 def test_platform_defaults_and_override():
     assert for_platform("cpu") == LoopShape(fence=True, unroll=1)
     assert not for_platform("gpu").fence and for_platform("gpu").unroll > 1
+    # a system may declare its own accelerator layout; the CPU's stays the platform's
+    intercept = gj.get_system("intercept")
+    assert for_platform("gpu", intercept) == LoopShape(fence=False, unroll=8)
+    assert for_platform("gpu", gj.get_system("impactor")) == for_platform("gpu")
+    assert for_platform("cpu", intercept) == for_platform("cpu")
     assert loop_shape() == for_platform("cpu")  # CI's backend
     with using_loop_shape(ACCELERATOR):
         assert loop_shape() == ACCELERATOR

@@ -141,6 +141,9 @@ class AbstractSystem(abc.ABC):
         batch_tolerance: ``(rtol, atol)`` to which a vmapped batch reproduces the per-run
             program on float outcomes (integer outcomes must be equal): both compute the same
             run, but XLA compiles the two programs separately and may round differently.
+        accelerator_loop_shape: the :class:`~gnc_jax._numerics.LoopShape` this system's loops
+            take on a GPU, where it was measured to beat the accelerators' default; ``None``:
+            the default.
     """
 
     name: ClassVar[str]
@@ -164,6 +167,7 @@ class AbstractSystem(abc.ABC):
     error_sources: ClassVar[dict[str, ErrorSource]] = {}
     source_groups: ClassVar[dict[str, tuple[str, ...]]] = {}
     budget_metrics: ClassVar[dict[str, Any]] = {}
+    accelerator_loop_shape: ClassVar[Any] = None
 
     # ---- cost ----
     def steps_per_run(self, config: dict) -> float | None:
