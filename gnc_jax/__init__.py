@@ -19,6 +19,7 @@ from ._random import stream_key, stream_normal, stream_uniform
 from ._status import Status
 from ._version import __version__
 from .budget import Budget, budget
+from .cells import run_cells
 from .montecarlo import CostEstimate, build, estimate_cost, run_key, simulate_one
 from .operating_envelope import Envelope, envelope
 from .report import report
@@ -47,6 +48,7 @@ __all__ = [
     "register_system",
     "systems",
     "run_key",
+    "run_cells",
     "run_study",
     "estimate_cost",
     "CostEstimate",

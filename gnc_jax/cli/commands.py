@@ -177,6 +177,7 @@ def cmd_envelope(args) -> int:
             progress=True,
             client=client,
             device=args.device,
+            batch_cells=args.batch_cells,
             **options,
         )
     finally:

@@ -125,6 +125,12 @@ def _add_envelope(sub) -> None:
         default=None,
         help="capsule: the entry corridor's load limit (default 10 g)",
     )
+    q.add_argument(
+        "--batch-cells",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="run the cells as one batch per compiled program (default: on a GPU)",
+    )
     _where(q)
     _device(q)
     q.set_defaults(func=cmd_envelope)
