@@ -92,10 +92,10 @@ def scan(hard, theta0, i, half_width=0.01, points=21):
                 max_jump=float(steps.max()))  # fmt: skip
 
 
-def central_differences(hard, theta0):
+def central_differences(hard, theta0, steps=STEPS):
     e = np.eye(len(theta0))
     return {h: np.array([(hard(theta0 + h * e[i]) - hard(theta0 - h * e[i])) / (2 * h)
-                         for i in range(len(theta0))]) for h in STEPS}  # fmt: skip
+                         for i in range(len(theta0))]) for h in steps}  # fmt: skip
 
 
 def crossing_noise(scenario, runs=8):
@@ -122,7 +122,7 @@ def rel_error(g, ref):
     return float(np.linalg.norm(g - ref) / np.linalg.norm(ref))
 
 
-def measure(name, runs, full, objective, temperatures, scans=True):
+def measure(name, runs, full, objective, temperatures, scans=True, steps=STEPS, event=True):
     scenario, problem, theta0, idx, valid = setup(name, runs, full, objective)
     hard = hard_objective(problem, idx, valid)
     t0 = time.perf_counter()
@@ -131,7 +131,7 @@ def measure(name, runs, full, objective, temperatures, scans=True):
     row = dict(scenario=name, runs=runs, full=full, hard=value, hard_first_call_s=compile_s)
     if scans:
         row["scan"] = {g: scan(hard, theta0, i) for i, g in enumerate(GAINS[name])}
-    cd = central_differences(hard, theta0)
+    cd = central_differences(hard, theta0, steps)
     row["central"] = {str(h): v.tolist() for h, v in cd.items()}
     ref = cd[REFERENCE_STEP]
     row["central_rel_error"] = {str(h): rel_error(v, ref) for h, v in cd.items()}
@@ -140,7 +140,7 @@ def measure(name, runs, full, objective, temperatures, scans=True):
         v, g, s = relaxed_gradient(problem, theta0, idx, valid, temp)
         row["relaxed"][f"sigmoid T={temp:g}"] = dict(value=v, grad=g.tolist(), s=s,
                                                      rel_error=rel_error(g, ref))  # fmt: skip
-    if hasattr(problem.law, "relaxation"):  # the laws with an event relaxation
+    if event and hasattr(problem.law, "relaxation"):  # the laws with an event relaxation
         v, g, s = relaxed_gradient(problem, theta0, idx, valid, problem.law_temperature, "event")
         row["relaxed"]["event"] = dict(value=v, grad=g.tolist(), s=s, rel_error=rel_error(g, ref))
     return row, scenario
@@ -174,16 +174,22 @@ def main():
     p.add_argument("--full-runs", type=int, default=0, help="also the packaged scenario")
     p.add_argument("--objective", default="miss_rms+10*dv_mean")
     p.add_argument("--temperatures", default="0.2,0.05,0.0125")
+    p.add_argument("--steps", default="0.3,0.1,0.03,0.01", help="central-difference steps")
+    p.add_argument("--no-event", action="store_true", help="skip the event relaxation")
     p.add_argument("--json", default="", help="write the figures to this file")
     args = p.parse_args()
     temps = [float(t) for t in args.temperatures.split(",")]
+    opts = dict(steps=[float(h) for h in args.steps.split(",")], event=not args.no_event)
+    assert REFERENCE_STEP in opts["steps"], f"--steps must include {REFERENCE_STEP}"
     rows, scenario = [], None
     for runs in [int(r) for r in args.runs.split(",") if r]:
-        row, scenario = measure(args.scenario, runs, False, args.objective, temps)
+        row, scenario = measure(args.scenario, runs, False, args.objective, temps, **opts)
         rows.append(row)
         report(row)
     if args.full_runs:
-        row, _ = measure(args.scenario, args.full_runs, True, args.objective, temps, scans=False)
+        row, _ = measure(
+            args.scenario, args.full_runs, True, args.objective, temps, scans=False, **opts
+        )
         rows.append(row)
         report(row)
     if scenario is not None and args.scenario == "bennu-apn":

@@ -105,7 +105,8 @@ def test_apn_relaxed_gradient_against_hard_central_differences(paper_scale):
     central differences (theta step 0.1) within 10 % (relative error of the gradient vector;
     CI: along trigger_off, the largest component); the event relaxation has the hard value but
     misses the slope (the crossings are noise-driven), and T = 0.0125 misses it by orders of
-    magnitude (measured: ``benchmarks/trigger_gradient.py``)."""
+    magnitude. Over the packaged 91,200-step approach no relaxation follows it (measured:
+    ``benchmarks/trigger_gradient.py``, ``docs/howto/tune.md``)."""
     problem, theta0, idx, valid = _apn_problem(64)
     args = problem.args
     hard = jax.jit(lambda th: problem.hard(args, problem.param.gains(th), idx, valid)[0])

@@ -22,7 +22,10 @@ its smooth relaxation (``guidance.trigger.schmitt_trigger`` with value |A|, leve
 a_off), which tends to the hard logic as the temperature T -> 0 and lets gradients reach every
 gain; evaluation uses the hard logic. With ``relaxation="event"`` the relaxed law keeps the
 hard switch and differentiates each firing event's crossing time instead
-(``guidance.trigger.schmitt_trigger_event``): the hard value, a gradient bounded per event.
+(``guidance.trigger.schmitt_trigger_event``): the hard value, a tangent only at the switching
+steps. It is exact where |A| drifts across a level; in the closed loop |A| crosses on
+navigation noise of the order of the hysteresis band, and neither relaxation's gradient
+follows the hard objective over the full approach (measured: ``docs/howto/tune.md``).
 """
 
 import math
@@ -166,6 +169,10 @@ class AugmentedPNGuidance(AbstractInterceptGuidance):
     relaxation: str = eqx.field(static=True, default="sigmoid")  # "sigmoid" | "event"
 
     ordered_gains = (("trigger_on", "trigger_off"),)
+
+    def __check_init__(self):
+        if self.relaxation not in ("sigmoid", "event"):
+            raise ValueError(f"relaxation: {self.relaxation!r}; allowed: 'sigmoid', 'event'")
 
     @classmethod
     def check(cls, section, config):
