@@ -20,13 +20,19 @@ between keeps its previous state. The paper gives no thresholds; gnc_jax derives
 engine (see ``simulation.pn.trigger_scale``). With ``relaxed=True`` the switch is replaced by
 its smooth relaxation (``guidance.trigger.schmitt_trigger`` with value |A|, levels a_on and
 a_off), which tends to the hard logic as the temperature T -> 0 and lets gradients reach every
-gain; evaluation uses the hard logic.
+gain; evaluation uses the hard logic. With ``relaxation="event"`` the relaxed law keeps the
+hard switch and differentiates each firing event's crossing time instead
+(``guidance.trigger.schmitt_trigger_event``): the hard value, a tangent only at the switching
+steps. It is exact where |A| drifts across a level; in the closed loop |A| crosses on
+navigation noise of the order of the hysteresis band, and neither relaxation's gradient
+follows the hard objective over the full approach (measured: ``docs/howto/tune.md``).
 """
 
 import math
 from typing import NamedTuple
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 
 from ..._numerics import cross3, dot3, norm3
@@ -36,7 +42,10 @@ from ...geometry.los import los_rate
 from ...params import from_config, param
 from ...schema import ScenarioError
 from ..base import EngineCommand, register_law, safe_unit
-from ..trigger import schmitt_trigger  # re-exported: gnc_jax.guidance.intercept.apn.schmitt_trigger
+from ..trigger import (  # schmitt_trigger re-exported: gnc_jax.guidance.intercept.apn
+    schmitt_trigger,
+    schmitt_trigger_event,
+)
 from .base import AbstractInterceptGuidance
 
 
@@ -114,6 +123,7 @@ class APNState(NamedTuple):
     engine_on: Scalar  # 0/1 (hard) or in [0, 1] (relaxed)
     command_mps2: Vector3  # continuous command A of eq. 11 (diagnostics, Figs. 7-9)
     coefficient: Scalar  # N of eq. 12
+    magnitude_prev: Scalar | None = None  # |A| of the previous step (event relaxation only)
 
 
 @register_law("apn")
@@ -156,8 +166,13 @@ class AugmentedPNGuidance(AbstractInterceptGuidance):
         0.05, lo=0.0, lo_open=True, hi=10.0, doc="relaxed trigger (gradients only)"
     )
     relaxed: bool = eqx.field(static=True, default=False)
+    relaxation: str = eqx.field(static=True, default="sigmoid")  # "sigmoid" | "event"
 
     ordered_gains = (("trigger_on", "trigger_off"),)
+
+    def __check_init__(self):
+        if self.relaxation not in ("sigmoid", "event"):
+            raise ValueError(f"relaxation: {self.relaxation!r}; allowed: 'sigmoid', 'event'")
 
     @classmethod
     def check(cls, section, config):
@@ -194,21 +209,27 @@ class AugmentedPNGuidance(AbstractInterceptGuidance):
 
     def init(self, nav: PNNavigation, ctx: PNGuidanceContext) -> APNState:
         z = jnp.zeros(())
-        return APNState(z, jnp.zeros(3), jnp.asarray(self.n0, float))
+        event = self.relaxed and self.relaxation == "event"
+        # the first step is no crossing: |A| "was" at a_on (neither below it nor at a_off)
+        prev = jax.lax.stop_gradient(jnp.asarray(self.a_on_mps2, float)) if event else None
+        return APNState(z, jnp.zeros(3), jnp.asarray(self.n0, float), prev)
 
     def step(self, state: APNState, nav: PNNavigation, t, ctx: PNGuidanceContext):
         """Engine command (throttle = fraction of the step at full thrust, unit direction)."""
         n = navigation_coefficient(norm3(nav.r), ctx.range0_m, self.n0, self.k, self.n_min)
         a_cmd, u = augmented_pn_command(nav, n, ctx.dynamics)
         magnitude = norm3(a_cmd)
-        temperature = self.temperature if self.relaxed else None
-        on = schmitt_trigger(
-            magnitude, state.engine_on, self.a_on_mps2, self.a_off_mps2, temperature
-        )
+        levels = (self.a_on_mps2, self.a_off_mps2)
+        if self.relaxed and self.relaxation == "event":
+            on = schmitt_trigger_event(magnitude, state.magnitude_prev, state.engine_on, *levels)
+        else:
+            temperature = self.temperature if self.relaxed else None
+            on = schmitt_trigger(magnitude, state.engine_on, *levels, temperature)
         on = jnp.where(t < ctx.cutoff_time_s, on, 0.0)
         fallback = cross3(ctx.reference_normal, u)
         direction = safe_unit(a_cmd, fallback / norm3(fallback))
-        return EngineCommand(on * ctx.pulse_fraction, direction), APNState(on, a_cmd, n)
+        prev = None if state.magnitude_prev is None else magnitude
+        return EngineCommand(on * ctx.pulse_fraction, direction), APNState(on, a_cmd, n, prev)
 
     def pulse_trains(
         self, nav: PNNavigation, dynamics, coast_s, engine_accel_mps2, impulse_bit_mps
