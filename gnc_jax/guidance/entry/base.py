@@ -116,7 +116,9 @@ class EntryGuidanceContext(eqx.Module):
             its own steps (``step % pc_every == 0``), the same schedule.
         loop_kind: ``"lax"``: the corrector's rounds are a ``lax.while_loop`` (evaluation,
             forward mode); ``"checkpointed"``: equinox's checkpointed ``while_loop`` (the same
-            rounds and arithmetic, reverse-mode differentiable with bounded memory).
+            rounds and arithmetic, reverse-mode differentiable with bounded memory);
+            ``"fixed"``: a masked ``lax.scan`` of the most rounds a solve can take (the same
+            arithmetic under ``vmap``, no loop predicate).
     """
 
     model: EntryModel

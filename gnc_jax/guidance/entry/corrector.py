@@ -124,7 +124,9 @@ def correct(
     ``while_loop`` (bounded by the most rounds a solve can take, so never cut short) and a
     round's steps a masked ``lax.scan`` of ``ROUND_STEPS`` (the arithmetic of the vmapped
     ``while_loop``, whose body runs for every run and keeps the finished ones' state):
-    reverse-mode differentiable, ``CHECKPOINTS`` round carries kept."""
+    reverse-mode differentiable, ``CHECKPOINTS`` round carries kept. ``"fixed"``: the same
+    masked rounds as a ``lax.scan`` of that bound, every round run and a solved run's carry
+    held (no loop predicate: nothing for a GPU to wait on between rounds)."""
 
     secant = law.corrector_start == "secant"
     solver = regula_falsi(
@@ -147,7 +149,7 @@ def correct(
 
     def steps(c, sigma_0):
         """Up to ROUND_STEPS steps of the prediction."""
-        if loop_kind == "checkpointed":
+        if loop_kind in ("checkpointed", "fixed"):
 
             def masked(c, _):
                 new = predictor_step(law, c, sigma_0, origin.speed_mps, model)
@@ -175,9 +177,15 @@ def correct(
         return s, jnp.where(end, x_next, x), _where(end, c_next, c)
 
     c = predictor_start(law, origin, x, active, model)
-    if loop_kind == "checkpointed":
-        # each prediction ends within ceil(max_steps / ROUND_STEPS) rounds
-        most = solver.n_evals_total * -(-law.predictor_max_steps // ROUND_STEPS)
+    # each prediction ends within ceil(max_steps / ROUND_STEPS) rounds
+    most = solver.n_evals_total * -(-law.predictor_max_steps // ROUND_STEPS)
+    if loop_kind == "fixed":  # every round runs, a solved run's carry held: no predicate
+
+        def masked_round(sxc, _):
+            return _where(solver.done(sxc[0]), sxc, round_(sxc)), None
+
+        s, _, _ = jax.lax.scan(masked_round, (s, x, c), None, length=most)[0]
+    elif loop_kind == "checkpointed":
         s, _, _ = eqxi.while_loop(
             lambda sxc: ~solver.done(sxc[0]),
             round_,

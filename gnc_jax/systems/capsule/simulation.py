@@ -88,7 +88,8 @@ class CapsuleSimulation(eqx.Module):
     n_control: int = eqx.field(static=True, default=2400)
     pc_every: int = eqx.field(static=True, default=4)
     # "lax": while_loops (evaluation, forward mode); "checkpointed": the same loops as
-    # equinox's checkpointed while_loop, reverse-mode differentiable (:func:`reverse_mode`)
+    # equinox's checkpointed while_loop, reverse-mode differentiable (:func:`reverse_mode`);
+    # "fixed": the same loops as scans of their bounds, masked (no loop predicate)
     loop_kind: str = eqx.field(static=True, default="lax")
 
     @property
@@ -338,6 +339,14 @@ FLIGHT_CHECKPOINTS = 32
 
 
 def _while(sim: CapsuleSimulation, cond, body, init, most: int):
+    if sim.loop_kind == "fixed":  # every trip runs, a finished run's carry held
+
+        def trip(x, _):
+            go = cond(x)
+            new = body(x)
+            return jax.tree_util.tree_map(lambda a, b: jnp.where(go, a, b), new, x), None
+
+        return jax.lax.scan(trip, init, None, length=most)[0]
     if sim.loop_kind == "checkpointed":
         return eqxi.while_loop(
             cond, body, init, max_steps=most, kind="checkpointed", checkpoints=FLIGHT_CHECKPOINTS
