@@ -283,10 +283,11 @@ def test_corrector_rounds_equal_the_slot_wise_corrector(law_and_ctx):
 
 def test_checkpointed_corrector_equals_the_while_loop_and_reverses_to_forward_mode(law_and_ctx):
     """The corrector's rounds as equinox's checkpointed ``while_loop`` (``loop_kind =
-    "checkpointed"``, what the capsule flies in reverse mode) return what the ``lax``
-    ``while_loop`` returns, bit for bit, at the cycles of a flight, batched; and the
-    reverse-mode derivative of the solution and its predicted crossrange with respect to the
-    speed at the cycle equals the forward-mode derivative of the ``lax`` loop."""
+    "checkpointed"``, what the capsule flies in reverse mode) and as a masked scan of their
+    bound (``"fixed"``) return what the ``lax`` ``while_loop`` returns, bit for bit, at the
+    cycles of a flight, batched; and the reverse-mode derivative of the solution and its
+    predicted crossrange with respect to the speed at the cycle equals the forward-mode
+    derivative of the ``lax`` loop."""
     _, law, ctx = law_and_ctx
     y, t, up, sigma, model = _corrector_cycles(law_and_ctx, every=6)
     start = jnp.asarray(sigma + np.resize(np.radians([0.0, 2.0, -7.0]), len(sigma)))
@@ -299,8 +300,10 @@ def test_checkpointed_corrector_equals_the_while_loop_and_reverses_to_forward_mo
     runs = (y, t, up, start, model)
     lax_ = jax.jit(jax.vmap(lambda *a: solve("lax", 1.0, *a)))(*runs)
     ckpt = jax.jit(jax.vmap(lambda *a: solve("checkpointed", 1.0, *a)))(*runs)
+    fixed = jax.jit(jax.vmap(lambda *a: solve("fixed", 1.0, *a)))(*runs)  # no loop predicate
     for name in lax_._fields:
         np.testing.assert_array_equal(getattr(ckpt, name), getattr(lax_, name), err_msg=name)
+        np.testing.assert_array_equal(getattr(fixed, name), getattr(lax_, name), err_msg=name)
 
     def summary(kind):
         def f(scale):
