@@ -113,7 +113,8 @@ class EntryGuidanceContext(eqx.Module):
             caller keeps the clock (a simulator looping over cycles of ``pc_every`` steps: a
             flag it knows for every run at once, so that under ``vmap`` the corrector stays a
             ``lax.cond`` instead of running, masked, at every step); ``None``: the law counts
-            its own steps (``step % pc_every == 0``), the same schedule.
+            its own steps (``step % pc_every == 0``), the same schedule. A Python ``bool``
+            when the caller's loop is unrolled: the branch is then chosen at trace time.
         loop_kind: ``"lax"``: the corrector's rounds are a ``lax.while_loop`` (evaluation,
             forward mode); ``"checkpointed"``: equinox's checkpointed ``while_loop`` (the same
             rounds and arithmetic, reverse-mode differentiable with bounded memory).
@@ -124,7 +125,7 @@ class EntryGuidanceContext(eqx.Module):
     hold_bank_rad: Scalar
     ratio_filter_gain: Scalar
     pc_every: int = eqx.field(static=True, default=4)
-    cycle_start: Array | None = None
+    cycle_start: Array | bool | None = None
     loop_kind: str = eqx.field(static=True, default="lax")
 
 

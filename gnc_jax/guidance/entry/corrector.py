@@ -85,6 +85,8 @@ def corrector_cycle(law, state: SkipEntryState, y, t, speed, ctx, model, pulled,
     else:
         is_pc_step = ctx.cycle_start
     active = active & is_pc_step  # (should the cond be batched, an idle step predicts nothing)
+    if isinstance(is_pc_step, bool):  # the caller's clock, known at trace time
+        return (pc if is_pc_step else no_pc)(None), active
     res = jax.lax.cond(is_pc_step, pc, no_pc, None)
     return res, active
 
