@@ -17,6 +17,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from ..._numerics import loop_shape
 from ..._types import Array, Float, Scalar, Vector3
 from ...dynamics.atmosphere import Atmosphere
 from ...dynamics.entry import (
@@ -308,7 +309,9 @@ def hermite_crossing(f0, df0, f1, df1, dt, level):
         )
         return jnp.clip(s - f / jnp.where(d != 0, d, 1.0), 0.0, 1.0)
 
-    return jax.lax.fori_loop(0, 4, newton, s)
+    # Unrolled in a GPU's layout: one kernel instead of a loop (in the corrector's rounds,
+    # a loop whose carry XLA copies every round).
+    return jax.lax.fori_loop(0, 4, newton, s, unroll=min(loop_shape().unroll, 4))
 
 
 def hermite_state(y0: EntryState, a0, y1: EntryState, a1, dt, s) -> EntryState:

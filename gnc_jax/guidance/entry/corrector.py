@@ -9,6 +9,7 @@ import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
 
+from ..._numerics import loop_shape
 from ...root_finding import RegulaFalsiResult, regula_falsi
 from .phases import is_direct
 from .predictor import (
@@ -149,13 +150,17 @@ def correct(
 
     def steps(c, sigma_0):
         """Up to ROUND_STEPS steps of the prediction."""
-        if loop_kind == "checkpointed":
+        fixed = not loop_shape().early_exit  # a GPU's layout: no predicate read back per step
+        if loop_kind == "checkpointed" or fixed:
 
             def masked(c, _):
                 new = predictor_step(law, c, sigma_0, origin.speed_mps, model)
                 return _where(integrating(law, c), new, c), None
 
-            return jax.lax.scan(masked, c, None, length=ROUND_STEPS)[0]
+            # Fixed, a round is unrolled whole: a loop inside the rounds' loop makes XLA copy
+            # every carried array of a round (the vmapped rounds keep the finished runs' state).
+            unroll = ROUND_STEPS if fixed else 1
+            return jax.lax.scan(masked, c, None, length=ROUND_STEPS, unroll=unroll)[0]
         c, _ = jax.lax.while_loop(
             lambda cj: integrating(law, cj[0]) & (cj[1] < ROUND_STEPS),
             lambda cj: (
