@@ -136,14 +136,14 @@ def sweep(items, out):
     import numpy as np
 
     import gnc_jax as gj
-    from gnc_jax._numerics import LoopShape, loop_shape, using_loop_shape
+    from gnc_jax._numerics import for_platform, loop_shape, using_loop_shape
 
     rec = dict(backend=jax.default_backend(), default=list(loop_shape()), studies=[])
     for item in items:
         name, runs, unrolls = item.split(":")
         runs, scen, first = int(runs), gj.load_scenario(name), None
         for u in [None] + [int(x) for x in unrolls.split(",")]:
-            shape = None if u is None else LoopShape(fence=False, unroll=u)
+            shape = None if u is None else for_platform("gpu")._replace(unroll=u)
             with using_loop_shape(shape):
                 kw = dict(runs=runs, seed=0, chunk_size=runs, progress=False, max_hours=1e6)
                 st = gj.run_study(scen, **kw)

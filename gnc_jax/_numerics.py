@@ -144,7 +144,10 @@ class LoopShape(NamedTuple):
 
     ``fence``: compute a guidance command once into memory (:func:`computed_once`) instead of
     leaving it to XLA's fusion. ``unroll``: control steps per trip of the innermost closed-loop
-    ``lax.scan``.
+    ``lax.scan``. ``early_exit``: a loop whose trip count depends on the data (the capsule
+    corrector's predictor steps within a round) stops as soon as every run of the batch is
+    done; without it the loop runs its fixed bound with the finished runs masked (the same
+    values), so that a GPU does not read the loop's predicate back to the host every trip.
 
     The defaults are per platform (:func:`for_platform`), measured on each: on a CPU a fence
     saves XLA recomputing the command in every consumer loop and unrolling gains nothing; on
@@ -156,10 +159,11 @@ class LoopShape(NamedTuple):
 
     fence: bool = True
     unroll: int = 1
+    early_exit: bool = True
 
 
-_PLATFORM_SHAPES = {"cpu": LoopShape(fence=True, unroll=1)}
-_ACCELERATOR_SHAPE = LoopShape(fence=False, unroll=4)
+_PLATFORM_SHAPES = {"cpu": LoopShape(fence=True, unroll=1, early_exit=True)}
+_ACCELERATOR_SHAPE = LoopShape(fence=False, unroll=4, early_exit=False)
 _LOOP_SHAPE: contextvars.ContextVar = contextvars.ContextVar("loop_shape", default=None)
 
 

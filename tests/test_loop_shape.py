@@ -16,7 +16,7 @@ from gnc_jax._numerics import (
     using_loop_shape,
 )
 
-ACCELERATOR = LoopShape(fence=False, unroll=4)  # the accelerators' default
+ACCELERATOR = LoopShape(fence=False, unroll=4, early_exit=False)  # the accelerators' default
 
 
 def example(name):
@@ -48,9 +48,11 @@ def test_accelerator_layout_on_cpu_matches_within_batch_tolerance(name):
 def test_platform_defaults_and_override():
     assert for_platform("cpu") == LoopShape(fence=True, unroll=1)
     assert not for_platform("gpu").fence and for_platform("gpu").unroll > 1
+    assert not for_platform("gpu").early_exit and for_platform("cpu").early_exit
+    assert for_platform("gpu") == ACCELERATOR
     # a system may declare its own accelerator layout; the CPU's stays the platform's
     intercept = gj.get_system("intercept")
-    assert for_platform("gpu", intercept) == LoopShape(fence=False, unroll=8)
+    assert for_platform("gpu", intercept) == LoopShape(fence=False, unroll=8, early_exit=False)
     assert for_platform("gpu", gj.get_system("impactor")) == for_platform("gpu")
     assert for_platform("cpu", intercept) == for_platform("cpu")
     assert loop_shape() == for_platform("cpu")  # CI's backend

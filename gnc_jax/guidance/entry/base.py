@@ -17,6 +17,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from ..._numerics import loop_shape
 from ..._types import Array, Float, Scalar, Vector3
 from ...dynamics.atmosphere import Atmosphere
 from ...dynamics.entry import (
@@ -113,7 +114,8 @@ class EntryGuidanceContext(eqx.Module):
             caller keeps the clock (a simulator looping over cycles of ``pc_every`` steps: a
             flag it knows for every run at once, so that under ``vmap`` the corrector stays a
             ``lax.cond`` instead of running, masked, at every step); ``None``: the law counts
-            its own steps (``step % pc_every == 0``), the same schedule.
+            its own steps (``step % pc_every == 0``), the same schedule. A Python ``bool``
+            when the caller's loop is unrolled: the branch is then chosen at trace time.
         loop_kind: ``"lax"``: the corrector's rounds are a ``lax.while_loop`` (evaluation,
             forward mode); ``"checkpointed"``: equinox's checkpointed ``while_loop`` (the same
             rounds and arithmetic, reverse-mode differentiable with bounded memory);
@@ -126,7 +128,7 @@ class EntryGuidanceContext(eqx.Module):
     hold_bank_rad: Scalar
     ratio_filter_gain: Scalar
     pc_every: int = eqx.field(static=True, default=4)
-    cycle_start: Array | None = None
+    cycle_start: Array | bool | None = None
     loop_kind: str = eqx.field(static=True, default="lax")
 
 
@@ -309,7 +311,9 @@ def hermite_crossing(f0, df0, f1, df1, dt, level):
         )
         return jnp.clip(s - f / jnp.where(d != 0, d, 1.0), 0.0, 1.0)
 
-    return jax.lax.fori_loop(0, 4, newton, s)
+    # Unrolled in a GPU's layout: one kernel instead of a loop (in the corrector's rounds,
+    # a loop whose carry XLA copies every round).
+    return jax.lax.fori_loop(0, 4, newton, s, unroll=min(loop_shape().unroll, 4))
 
 
 def hermite_state(y0: EntryState, a0, y1: EntryState, a1, dt, s) -> EntryState:

@@ -9,6 +9,7 @@ import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
 
+from ..._numerics import loop_shape
 from ...root_finding import RegulaFalsiResult, regula_falsi
 from .phases import is_direct
 from .predictor import (
@@ -85,6 +86,8 @@ def corrector_cycle(law, state: SkipEntryState, y, t, speed, ctx, model, pulled,
     else:
         is_pc_step = ctx.cycle_start
     active = active & is_pc_step  # (should the cond be batched, an idle step predicts nothing)
+    if isinstance(is_pc_step, bool):  # the caller's clock, known at trace time
+        return (pc if is_pc_step else no_pc)(None), active
     res = jax.lax.cond(is_pc_step, pc, no_pc, None)
     return res, active
 
@@ -149,13 +152,17 @@ def correct(
 
     def steps(c, sigma_0):
         """Up to ROUND_STEPS steps of the prediction."""
-        if loop_kind in ("checkpointed", "fixed"):
+        fixed = not loop_shape().early_exit  # a GPU's layout: no predicate read back per step
+        if loop_kind in ("checkpointed", "fixed") or fixed:
 
             def masked(c, _):
                 new = predictor_step(law, c, sigma_0, origin.speed_mps, model)
                 return _where(integrating(law, c), new, c), None
 
-            return jax.lax.scan(masked, c, None, length=ROUND_STEPS)[0]
+            # Fixed, a round is unrolled whole: a loop inside the rounds' loop makes XLA copy
+            # every carried array of a round (the vmapped rounds keep the finished runs' state).
+            unroll = ROUND_STEPS if fixed else 1
+            return jax.lax.scan(masked, c, None, length=ROUND_STEPS, unroll=unroll)[0]
         c, _ = jax.lax.while_loop(
             lambda cj: integrating(law, cj[0]) & (cj[1] < ROUND_STEPS),
             lambda cj: (

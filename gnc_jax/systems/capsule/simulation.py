@@ -312,7 +312,16 @@ def _run(sim: CapsuleSimulation, law: AbstractEntryGuidance, key, draws: Capsule
         return LoopState(truth, c.estimate, g, actuator, tally), rec
 
     def cycle(c: LoopState, n=sim.pc_every):
-        return jax.lax.scan(control_step, c, jnp.arange(n))
+        if loop_shape().unroll < n:
+            return jax.lax.scan(control_step, c, jnp.arange(n), unroll=loop_shape().unroll)
+        # Unrolled whole (a GPU's layout): the step index is a Python int, so which step runs
+        # the corrector is decided at trace time; a scan would leave a branch taken on the
+        # device, with a trip to the host, and a loop whose carry is copied, at every step.
+        recs = []
+        for j in range(n):
+            c, rec = control_step(c, j)
+            recs.append(rec)
+        return c, (jax.tree_util.tree_map(lambda *x: jnp.stack(x), *recs) if record else None)
 
     n_cycles, rest = divmod(sim.n_control, sim.pc_every)
     if record:

@@ -46,8 +46,8 @@ def guidance_step(
 
     # Once per step, not once per consumer loop (see _numerics.computed_once).
     command, law_state, g = computed_once(law_and_gravity, t, state.law, navsol)
-    on = law_state.engine_on
-    ignition = (on > 0.5) & (actuator.on_prev <= 0.5)
+    on, on_prev = law_state.engine_on, state.law.engine_on  # the trigger now and a step ago
+    ignition = (on > 0.5) & (on_prev <= 0.5)
     fresh = err.attitude_rad * pointing_table[tally.ignitions % N_IGNITION_DRAWS]
     pointing = jnp.where(ignition, fresh, actuator.pointing_error)
 
@@ -73,12 +73,12 @@ def guidance_step(
     fired = on > 0.5
     # A firing is one pulse train of one thruster direction: reversing the thrust (the
     # opposite thrusters) while the trigger stays on starts a new firing.
-    reversal = fired & (actuator.on_prev > 0.5) & (dot3(direction, actuator.direction_prev) < 0)
+    reversal = fired & (on_prev > 0.5) & (dot3(direction, actuator.direction_prev) < 0)
     new = LoopState(
         truth=new_truth,
         estimate=estimate,
         law=law_state,
-        actuator=PulseActuator(on_prev=on, direction_prev=direction, pointing_error=pointing),
+        actuator=PulseActuator(direction_prev=direction, pointing_error=pointing),
         tally=PulseTally(
             dv_mps=tally.dv_mps + safe_norm(dv),
             firings=tally.firings + (ignition | reversal).astype(jnp.int32),

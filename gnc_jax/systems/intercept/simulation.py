@@ -59,7 +59,7 @@ def start(
         truth=sim.y0,
         estimate=() if sim.nav_model == "perfect" else initial_estimate(sim, know_pos, know_vel),
         law=law.init(None, sim.context),
-        actuator=PulseActuator(on_prev=z, direction_prev=jnp.zeros(3), pointing_error=jnp.zeros(2)),
+        actuator=PulseActuator(direction_prev=jnp.zeros(3), pointing_error=jnp.zeros(2)),
         tally=PulseTally(dv_mps=z, firings=zi, ignitions=zi, pulses=zi, last_firing_s=z),
     )
     return state, draws

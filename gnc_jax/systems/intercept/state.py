@@ -63,11 +63,12 @@ class Estimate(NamedTuple):
 
 
 class PulseActuator(NamedTuple):
-    """What the thrusters remember between guidance steps: the trigger's last state (to see
-    an ignition), the last firing direction (to see a reversal) and the pointing error of the
-    current pulse train (drawn at its ignition)."""
+    """What the thrusters remember between guidance steps: the last firing direction (to see
+    a reversal) and the pointing error of the current pulse train (drawn at its ignition).
+    The trigger's last state (to see an ignition) is the law's own ``engine_on``: carried
+    once, not also here (a value carried twice is one more array in the loop and, on a GPU,
+    one more copy kernel per step)."""
 
-    on_prev: Scalar
     direction_prev: Vector3
     pointing_error: Float[Array, "2"]  # rad, about the orbit normal (and across it in 3-D)
 

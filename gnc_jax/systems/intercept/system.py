@@ -245,7 +245,7 @@ class InterceptSystem(AbstractSystem):
     # Latency-bound on a GPU (91,200 sequential steps for bennu-apn whatever the batch): 8
     # control steps per scan trip instead of 4 took 2,000 runs from 2.57 s to 2.29 s on an H100
     # (16: 2.24 s, for twice the compile time); benchmarks/gpu_loops.py --sweep.
-    accelerator_loop_shape: ClassVar[Any] = LoopShape(fence=False, unroll=8)
+    accelerator_loop_shape: ClassVar[Any] = LoopShape(fence=False, unroll=8, early_exit=False)
 
     def steps_per_run(self, config):
         return intercept_steps(config)
