@@ -89,7 +89,8 @@ def dispersed_footprints(config: dict, runs: int, seed: int) -> np.ndarray:
 
 def target_reach(config: dict, indices, seed: int) -> np.ndarray:
     """Whether runs ``indices`` of a study of ``config`` with root seed ``seed`` can reach the
-    target itself, downrange and crossrange: each run's crossrange span (km, shape
+    target itself, downrange and crossrange, with a bank of one magnitude reversed once (a
+    sufficient test: a bank history may do better): each run's crossrange span (km, shape
     (len(indices), 2); > 0 left of the track) at the target's downrange of its own dispersed
     vehicle's three-dimensional constant-magnitude flights with one reversal
     (:func:`~gnc_jax.guidance.entry.corridor.target_crossrange_span`; the study's draws). A
