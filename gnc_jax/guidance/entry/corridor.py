@@ -23,6 +23,10 @@ Both are for the nominal vehicle and atmosphere (no dispersion), in the scenario
   and entry state, with the chute range measured along the nominal entry -> target track
   (the axis the target's ``range_km`` and the runs' downrange errors are measured on): what
   the dispersed population can physically reach, run by run.
+* **Target reach** (:func:`target_crossrange_span`): whether a run can reach the target
+  itself, downrange and crossrange: its flights in three dimensions (the lateral lift turns
+  them) at constant bank magnitudes reversed once, and the crossrange they land at on the
+  target's downrange. The footprint above averages the lateral lift out.
 """
 
 import math
@@ -33,7 +37,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._types import Array, Scalar
-from ...dynamics.entry import EntryConditions, EntryState, entry_state_from_conditions
+from ...dynamics.entry import (
+    EntryConditions,
+    EntryState,
+    aerodynamic_acceleration,
+    entry_state_from_conditions,
+    gravity_acceleration,
+)
 from ...geometry.sphere import along_cross_track, central_angle, destination, to_earth_fixed, unit
 from ...integrate import rk4_step
 from .base import EntryModel, flight_variables
@@ -54,19 +64,48 @@ class OpenLoopFlight(NamedTuple):
     chute_unit: Array
 
 
+def banked_field(model: EntryModel):
+    """d/dt (r, v) of ``model`` in three dimensions at a signed bank (rad, the argument): the
+    lift's lateral component turns the flight (negative bank: to the left), as the truth
+    flies it."""
+    vehicle = model.measured_vehicle()
+
+    def field(t, y: EntryState, bank) -> EntryState:
+        del t
+        a = gravity_acceleration(y.r, model.earth) + aerodynamic_acceleration(
+            y.r, y.v, bank, vehicle, model.earth, model.atmosphere
+        )
+        return EntryState(y.v, a)
+
+    return field
+
+
 def fly_from_state(
-    model: EntryModel, y0: EntryState, bank_rad: Scalar, chute_m: Scalar, steps: int
+    model: EntryModel,
+    y0: EntryState,
+    bank_rad: Scalar,
+    chute_m: Scalar,
+    steps: int,
+    lateral: bool = False,
+    reversal_s: Scalar = jnp.inf,
 ) -> OpenLoopFlight:
     """One open-loop flight of ``steps`` RK4 steps of ``DT_S`` (s) at constant bank (rad) from
     the ECI state ``y0`` at t = 0 (m, m/s) to the chute altitude ``chute_m`` (m; the state
-    freezes there)."""
+    freezes there). ``lateral`` (static): fly the signed bank in three dimensions
+    (:func:`banked_field`), reversed once at ``reversal_s`` (s; never by default), instead of
+    the vertical plane (lift L cos sigma)."""
     earth = model.earth
-    cos_b = jnp.cos(bank_rad)
-    field = lambda t, y, a: model.vertical_plane_field(t, y, a)  # noqa: E731
+    if lateral:
+        field = banked_field(model)
+        arg_at = lambda t: jnp.where(t < reversal_s, bank_rad, -bank_rad)  # noqa: E731
+    else:
+        cos_b = jnp.cos(bank_rad)
+        field = lambda t, y, a: model.vertical_plane_field(t, y, a)  # noqa: E731
+        arg_at = lambda t: cos_b  # noqa: E731
 
     def body(c, _):
         y, t, done, peak, chute_r, t_chute = c
-        y1 = rk4_step(field, t, y, DT_S, cos_b)
+        y1 = rk4_step(field, t, y, DT_S, arg_at(t))
         alt1 = flight_variables(y1, earth).altitude_m
         crossing = ~done & (alt1 < chute_m)
         peak = jnp.where(done, peak, jnp.maximum(peak, model.load_g(y1)))
@@ -174,6 +213,91 @@ def track_footprints(models: EntryModel, y0s: EntryState, start_unit, azimuth, c
     return jax.vmap(lambda m, y: track_footprint(m, y, start_unit, azimuth, chute_m, steps))(
         models, y0s
     )
+
+
+REACH_BANKS_DEG = np.arange(0.0, 180.0 + 1e-9, 5.0)  # bank magnitudes of the target reach
+# times (s) of the one reversal of the target reach's flights, the last none (a one-sided
+# flight): the first entry's, where the heading that the Kepler arc carries is set
+REACH_REVERSALS_S = np.append(np.arange(0.0, 400.0, 10.0), np.inf)
+
+
+def _span_of(hit, cross):
+    lo = jnp.min(jnp.where(hit, cross, jnp.inf))
+    hi = jnp.max(jnp.where(hit, cross, -jnp.inf))
+    return jnp.where(hit.any(), jnp.stack([lo, hi]), jnp.nan)
+
+
+def grid_crossings(landed, along, cross):
+    """Crossranges at zero along-track error along the last axis (magnitudes): wherever the
+    along error changes sign between neighbouring magnitudes that both land, interpolated
+    linearly; ``(hit, crossrange)`` of the neighbouring pairs."""
+    a0, a1 = along[..., :-1], along[..., 1:]
+    hit = landed[..., :-1] & landed[..., 1:] & (a0 * a1 <= 0.0) & (a0 != a1)
+    w = a0 / jnp.where(a0 != a1, a0 - a1, 1.0)
+    return hit, cross[..., :-1] + w * (cross[..., 1:] - cross[..., :-1])
+
+
+def _family_crossings(fly, banks, track):
+    """The zero along-track crossings of one family of magnitudes (``fly(bank)`` a flight,
+    ``track(unit)`` its (along, cross) angles): those of the grid (:func:`grid_crossings`)
+    and, as the footprint's longest range, the one between the landing edge (bisected, 30
+    halvings, as :func:`_bisect_edge`) and the lowest landing magnitude, found by 30
+    halvings of the along error; ``(hit, crossrange)``."""
+    f = jax.vmap(fly)(banks)
+    ac = jax.vmap(track)(f.chute_unit)
+    hit, cross = grid_crossings(f.landed, ac[:, 0], ac[:, 1])
+    k = jnp.argmax(f.landed)
+
+    def halve_edge(_, ends):
+        o, i = ends
+        mid = 0.5 * (o + i)
+        lands = fly(mid).landed
+        return jnp.where(lands, o, mid), jnp.where(lands, mid, i)
+
+    _, edge = jax.lax.fori_loop(0, 30, halve_edge, (banks[jnp.maximum(k - 1, 0)], banks[k]))
+    a_edge = track(fly(edge).chute_unit)[0]
+    a_k = ac[k, 0]
+
+    def halve_along(_, ends):
+        e, b = ends
+        mid = 0.5 * (e + b)
+        same = track(fly(mid).chute_unit)[0] * a_edge > 0.0
+        return jnp.where(same, mid, e), jnp.where(same, b, mid)
+
+    lo, hi = jax.lax.fori_loop(0, 30, halve_along, (edge, banks[k]))
+    last = fly(0.5 * (lo + hi))
+    beyond = (k > 0) & f.landed.any() & (a_edge * a_k < 0.0) & last.landed
+    return (
+        jnp.append(hit, beyond),
+        jnp.append(cross, track(last.chute_unit)[1]),
+    )
+
+
+@jax.jit(static_argnames=("steps",))
+def target_crossrange_span(
+    model: EntryModel, y0: EntryState, start_unit, target_unit, chute_m, steps
+):
+    """[least, greatest] crossrange (m; > 0 left of the ``start_unit`` -> ``target_unit``
+    track) at the target's downrange of the three-dimensional constant-magnitude flights of
+    ``model`` from ``y0`` (:func:`fly_from_state` with ``lateral``): each magnitude of
+    ``REACH_BANKS_DEG`` flown right (+) or left (-) first and reversed once at each time
+    of ``REACH_REVERSALS_S``, the crossings of each family by :func:`_family_crossings`.
+    The crossrange moves continuously with the reversal time, so the run reaches the
+    target, downrange and crossrange, when the span holds 0 (with a bank of one magnitude
+    reversed once; a bank history the law flies may reach a little more); NaN, NaN when no
+    flight lands at the target's downrange."""
+    banks = jnp.radians(jnp.asarray(REACH_BANKS_DEG))
+    track = lambda u: along_cross_track(u, start_unit, target_unit)  # noqa: E731
+
+    def family(sign, tau):
+        fly = lambda b: fly_from_state(model, y0, sign * b, chute_m, steps, True, tau)  # noqa: E731
+        return _family_crossings(fly, banks, track)
+
+    times = jnp.asarray(REACH_REVERSALS_S)
+    hit, cross = jax.vmap(lambda s: jax.vmap(lambda tau: family(s, tau))(times))(
+        jnp.array([1.0, -1.0])
+    )
+    return model.earth.equatorial_radius_m * _span_of(hit, cross)
 
 
 class Corridor(NamedTuple):

@@ -18,7 +18,12 @@ from ..._random import run_key
 from ...dynamics.entry import entry_state_from_conditions
 from ...geometry.sphere import unit
 from ...guidance.entry.base import EntryModel
-from ...guidance.entry.corridor import DT_S, EntryEnvelope, track_footprints
+from ...guidance.entry.corridor import (
+    DT_S,
+    EntryEnvelope,
+    target_crossrange_span,
+    track_footprints,
+)
 from ...params import from_scenario, schema_of
 from . import simulation as capsule_sim
 from .params import Entry, SimulationParams, capsule_params
@@ -45,17 +50,23 @@ def entry_envelope(config: dict, load_limit_g: float) -> EntryEnvelope:
     )
 
 
-@jax.jit(static_argnames=("steps",))
-def _run_footprints(sim, seed, indices, steps):
-    """Footprints (m) of the runs ``indices`` of root seed ``seed``: each run's dispersed
-    entry state, vehicle and atmosphere (:func:`~gnc_jax.systems.capsule.simulation.dispersed_entry`
-    on :func:`~gnc_jax.montecarlo.run_key`, the draws of the study), flown open loop."""
+def _run_models(sim, seed, indices):
+    """Models and entry states of the runs ``indices`` of root seed ``seed``: each run's
+    dispersed entry state, vehicle and atmosphere
+    (:func:`~gnc_jax.systems.capsule.simulation.dispersed_entry` on
+    :func:`~gnc_jax.montecarlo.run_key`, the draws of the study)."""
 
     def one(i):
         y0, vehicle, atmosphere, _ = capsule_sim.dispersed_entry(sim, run_key(seed, i))
         return EntryModel(vehicle, sim.earth, atmosphere), y0
 
-    models, y0s = jax.vmap(one)(indices)
+    return jax.vmap(one)(indices)
+
+
+@jax.jit(static_argnames=("steps",))
+def _run_footprints(sim, seed, indices, steps):
+    """Footprints (m) of the runs ``indices`` (:func:`_run_models`), flown open loop."""
+    models, y0s = _run_models(sim, seed, indices)
     start = unit(entry_state_from_conditions(sim.entry, sim.earth).r)
     return track_footprints(models, y0s, start, sim.entry.azimuth, sim.chute_altitude_m, steps)
 
@@ -74,6 +85,30 @@ def dispersed_footprints(config: dict, runs: int, seed: int) -> np.ndarray:
     steps = int(math.ceil(from_scenario(SimulationParams, config).max_time_s / DT_S))
     out = _run_footprints(sim, seed, jnp.arange(runs), steps)
     return np.asarray(out) / 1e3
+
+
+def target_reach(config: dict, indices, seed: int) -> np.ndarray:
+    """Whether runs ``indices`` of a study of ``config`` with root seed ``seed`` can reach the
+    target itself, downrange and crossrange, with a bank of one magnitude reversed once (a
+    sufficient test: a bank history may do better): each run's crossrange span (km, shape
+    (len(indices), 2); > 0 left of the track) at the target's downrange of its own dispersed
+    vehicle's three-dimensional constant-magnitude flights with one reversal
+    (:func:`~gnc_jax.guidance.entry.corridor.target_crossrange_span`; the study's draws). A
+    run reaches the target when its span holds 0; a span whose nearer end is ``d`` km from
+    0 misses by about ``d`` km at best with such a bank. About 10,000 flights per run (10-20 s
+    each run on a CPU core): an analysis of chosen runs, not part of the pre-check. Needs no
+    guidance law and no reference design."""
+    sim = capsule_sim.build_from_config(config)
+    steps = int(math.ceil(from_scenario(SimulationParams, config).max_time_s / DT_S))
+    start = unit(entry_state_from_conditions(sim.entry, sim.earth).r)
+    models, y0s = jax.jit(_run_models)(sim, seed, jnp.asarray(indices))
+    spans = []
+    for k in range(len(indices)):
+        model, y0 = jax.tree_util.tree_map(lambda x, k=k: x[k], (models, y0s))
+        spans.append(
+            target_crossrange_span(model, y0, start, sim.target_fixed, sim.chute_altitude_m, steps)
+        )
+    return np.asarray(spans).reshape(-1, 2) / 1e3
 
 
 def reachability(footprints_km: np.ndarray, range_km: float) -> dict[str, float]:

@@ -401,9 +401,11 @@ def _outcome(
     """Chute-point errors against the nominal entry -> target track, loads, the law's log.
 
     Status, by precedence: ``skip_out`` (climbed above the law's skip-out altitude),
-    ``time_out`` (no chute crossing within ``max_time_s``), ``no_convergence`` (the last
-    corrector cycle failed), ``out_of_domain`` (a downrange or crossrange miss beyond
-    ``miss_limit_m``: the guidance lost the target), else ``ok``."""
+    ``time_out`` (no chute crossing within ``max_time_s``), ``out_of_domain`` (a downrange or
+    crossrange miss beyond ``miss_limit_m``: the run lost the target, whether its corrector
+    converged or not; a dispersed vehicle that cannot reach the target ends here), then
+    ``no_convergence`` (the last corrector cycle failed, the chute point within the miss
+    limit), else ``ok``."""
     earth, f, g = sim.earth, c.tally, c.law
     log = g.log
     nominal_start = unit(entry_state_from_conditions(sim.entry, earth).r)
@@ -440,11 +442,11 @@ def _outcome(
         (
             (log.skipped_out, Status.skip_out),
             (~c.truth.done, Status.time_out),
-            (g.last_status != RootStatus.ok, Status.no_convergence),
             (
                 jnp.maximum(jnp.abs(along), jnp.abs(cross)) * r_e_km * 1e3 > sim.miss_limit_m,
                 Status.out_of_domain,
             ),
+            (g.last_status != RootStatus.ok, Status.no_convergence),
         ),
     )
 
