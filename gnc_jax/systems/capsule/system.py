@@ -140,10 +140,11 @@ class CapsuleSystem(AbstractSystem):
     # per-run time is at 256 runs per device, whose working set (about 2 kB per run of
     # live buffers, the compiled chunk's temp memory) half fills a 1 MB L2 cache
     chunk_per_device = 256
-    # GPU: lunar-skip-entry on one H100 took 0.98 s for 10,000 runs and 2.1 s for 100,000
-    # (one chunk each): 128 us per sequential step plus 1.9 ns per run-step.
+    # GPU: lunar-skip-entry on one H100 (a guidance cycle unrolled whole, the corrector's
+    # predictor steps masked) took 0.51 s for 512 runs and 1.34 s for 100,000 (one chunk
+    # each): 76 us per sequential step plus 1.25 ns per run-step.
     step_costs: ClassVar[dict[str, StepCost]] = {
-        "gpu": StepCost(1.9e-9, 1.28e-4, "lunar-skip-entry on " + H100_SOURCE)
+        "gpu": StepCost(1.25e-9, 7.6e-5, "lunar-skip-entry on " + H100_SOURCE)
     }
     run_bytes: ClassVar[int] = 2_500  # the compiled batch's bytes per run on the CPU (2,476)
 

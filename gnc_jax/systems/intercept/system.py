@@ -234,12 +234,12 @@ class InterceptSystem(AbstractSystem):
     }
 
     step_seconds = STEP_SECONDS
-    # GPU: bennu-apn on one H100 (unfenced loops, scans unrolled 4 times) took 2.61 s for 2,000
-    # runs and 19.6 s for 200,000 (one chunk each, through the CLI): its strictly sequential
-    # steps cost the same whatever the batch, 11 us per step of steps_per_run, plus 0.39 ns per
-    # run-step.
+    # GPU: bennu-apn on one H100 (unfenced loops, scans unrolled 8 times) took 2.30 s for 2,000
+    # runs and 19.8 s for 200,000 (one chunk each, through the CLI): its strictly sequential
+    # steps cost the same whatever the batch, 9.7 us per step of steps_per_run, plus 0.40 ns
+    # per run-step.
     step_costs: ClassVar[dict[str, StepCost]] = {
-        "gpu": StepCost(3.9e-10, 1.1e-5, "bennu-apn on " + H100_SOURCE)
+        "gpu": StepCost(4.0e-10, 9.7e-6, "bennu-apn on " + H100_SOURCE)
     }
     run_bytes: ClassVar[int] = 4_500  # the compiled batch's bytes per run on the CPU (4,484)
     # Latency-bound on a GPU (91,200 sequential steps for bennu-apn whatever the batch): 8
