@@ -24,16 +24,11 @@ import numpy as np
 from ._numerics import explicit_loop_shape, for_platform, using_loop_shape
 from ._random import plan_key
 from .backend import describe, placement, select
-from .montecarlo import MAX_HOURS, MAX_MEMORY_FRACTION, _check_memory, build
+from .montecarlo import MAX_HOURS, MAX_MEMORY_FRACTION, _check_memory, build, structure
 from .planner import estimate_cost, plan_chunk
 from .scenario import Scenario, ScenarioError
 from .study import Study, _checked_cost, _nan_to_status
 from .systems.base import get_system
-
-
-def _structure(sim, law) -> tuple:
-    leaves, treedef = jax.tree_util.tree_flatten((sim, law))
-    return treedef, tuple((jnp.shape(x), jnp.result_type(x)) for x in leaves)
 
 
 def _program(system):
@@ -90,7 +85,7 @@ def run_cells(
             except ScenarioError as e:
                 results[n] = e
                 continue
-            groups.setdefault(_structure(*built), []).append((n, built))
+            groups.setdefault(structure(built), []).append((n, built))
         shape = explicit_loop_shape() or for_platform(backend.platform, system)
         for members in groups.values():
             outs, compile_s, wall_s, chunk = _run_group(

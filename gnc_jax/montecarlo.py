@@ -89,6 +89,13 @@ ANNOUNCE_S = 30.0
 _COMPILED: dict = {}
 
 
+def structure(tree) -> tuple:
+    """What a compiled program depends on of its arguments ``tree``: the tree structure (with
+    static fields), and each leaf's shape and dtype; values are arguments, not part of it."""
+    leaves, treedef = jax.tree_util.tree_flatten(tree)
+    return treedef, tuple((jnp.shape(x), jnp.result_type(x)) for x in leaves)
+
+
 def _compile(system, fn, where, sim, law, seed_arr, chunk):
     """Ahead-of-time compile (timed), reusing an executable compiled for the same structure.
 
@@ -100,9 +107,7 @@ def _compile(system, fn, where, sim, law, seed_arr, chunk):
     recompile.
     """
     shape = explicit_loop_shape() or for_platform(where[0][0].platform, system)
-    leaves, treedef = jax.tree_util.tree_flatten((sim, law, seed_arr))
-    shapes = tuple((jnp.shape(x), jnp.result_type(x)) for x in leaves)
-    key = (system, where, chunk, shape, treedef, shapes)
+    key = (system, where, chunk, shape, structure((sim, law, seed_arr)))
     if key in _COMPILED:
         return _COMPILED[key], 0.0
     t0 = time.perf_counter()

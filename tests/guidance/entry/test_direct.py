@@ -17,21 +17,8 @@ from gnc_jax.schema import ScenarioError
 from gnc_jax.systems.capsule import simulation as capsule_sim
 from gnc_jax.systems.capsule.reference import mode_reference, nominal_problem
 
-ZERO = [
-    f"dispersions.{k}=0.0"
-    for k in (
-        "speed_mps",
-        "fpa_deg",
-        "heading_deg",
-        "downrange_km",
-        "altitude_km",
-        "crossrange_km",
-        "cl_pct",
-        "cd_pct",
-        "density_pct",
-        "mass_pct",
-    )
-]
+# every dispersion of the capsule off (its scenario schema lists them)
+ZERO = [f"dispersions.{k}=0.0" for k in gj.get_system("capsule").schema()["dispersions"]]
 
 
 def _setup(range_km):

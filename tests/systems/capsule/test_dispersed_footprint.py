@@ -23,21 +23,8 @@ from gnc_jax.systems.capsule import envelope as capsule_envelope
 from gnc_jax.systems.capsule import simulation as capsule_sim
 
 SHORT = ["simulation.max_time_s=2000.0"]  # the horizon of tests/test_envelope.py
-ZERO = [
-    f"dispersions.{k}=0.0"
-    for k in (
-        "speed_mps",
-        "fpa_deg",
-        "heading_deg",
-        "downrange_km",
-        "altitude_km",
-        "crossrange_km",
-        "cl_pct",
-        "cd_pct",
-        "density_pct",
-        "mass_pct",
-    )
-]
+# every dispersion of the capsule off (its scenario schema lists them)
+ZERO = [f"dispersions.{k}=0.0" for k in gj.get_system("capsule").schema()["dispersions"]]
 
 
 @pytest.fixture
