@@ -54,8 +54,14 @@ def _status() -> str:
     src = inspect.getsource(Status)
     rows = []
     for s in Status:
-        line = next((ln for ln in src.splitlines() if ln.strip().startswith(f"{s.name} =")), "")
-        rows.append(f"| {int(s)} | `{s.name}` | {line.partition('#')[2].strip()} |")
+        lines = src.splitlines()
+        i = next((i for i, ln in enumerate(lines) if ln.strip().startswith(f"{s.name} =")), None)
+        words = [] if i is None else [lines[i].partition("#")[2].strip()]
+        for ln in lines[i + 1 :] if i is not None else []:  # the comment's continuation lines
+            if not ln.strip().startswith("#"):
+                break
+            words.append(ln.strip().lstrip("#").strip())
+        rows.append(f"| {int(s)} | `{s.name}` | {' '.join(words)} |")
     exits = [
         (0, "the study ran and at most `--max-failed` of its runs failed"),
         (cli.EXIT_REFUSED, "bad input or a runaway cost, refused before anything was compiled"),

@@ -196,6 +196,7 @@ def envelope(
             runs=study.runs,
             failed=s["failed"],
             failed_fraction=s["failed"] / study.runs,
+            failed_by_status=", ".join(f"{k} {v}" for k, v in s["failed_by_status"].items()),
             wall_s=study.wall_s + study.compile_s if n in batched else time.perf_counter() - t0,
             compile_s=study.compile_s,
         )

@@ -13,7 +13,8 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm.auto import tqdm
 
-from .design import design_with_fallback
+from ...schema import ScenarioError
+from .design import design_at_the_edge, design_with_fallback
 from .nominal import NominalProblem
 from .reach import require_reachable
 from .reference import ReferenceTrajectory
@@ -73,7 +74,12 @@ def reference_for(problem: NominalProblem, description: dict, **design_kwargs):
         with tqdm(total=steps + 2, desc="reference design", unit="stage", file=sys.stderr) as bar:
             bar.set_postfix_str("reach check")
             guess = design_kwargs.get("sigma_1_guess")
-            _, _, nearest = require_reachable(problem, entry, vehicle, guess)
+            try:
+                _, _, nearest = require_reachable(problem, entry, vehicle, guess)
+            except ScenarioError as refusal:  # beyond the design's banks: at the edge
+                if not str(refusal).startswith("entry.range_km"):
+                    raise
+                nearest, edge = None, refusal
             bar.update()
 
             retry = []
@@ -87,8 +93,11 @@ def reference_for(problem: NominalProblem, description: dict, **design_kwargs):
                 bar.set_postfix_str(f"{label}step {step}/{steps}, objective {objective:.4g}")
                 bar.update()
 
-            kwargs = dict(design_kwargs, sigma_1_guess=nearest if guess is None else guess)
-            d = design_with_fallback(problem, entry, vehicle, callback=stepped, **kwargs)
+            if nearest is None:
+                d = design_at_the_edge(problem, entry, vehicle, edge)
+            else:
+                kwargs = dict(design_kwargs, sigma_1_guess=nearest if guess is None else guess)
+                d = design_with_fallback(problem, entry, vehicle, callback=stepped, **kwargs)
             bar.set_postfix_str("tabulating the reference")
             ref = tabulate_reference(problem, d)
             bar.update()

@@ -11,6 +11,7 @@ refused.
 """
 
 import math
+import sys
 from typing import NamedTuple
 
 import jax
@@ -47,6 +48,13 @@ from .reach import candidate_banks, candidate_flights, conditions
 # bracketing then straddles the jump to the direct entry and the solve stalls at its guess.
 SIGMA_1_FINE_STEP_RAD = math.radians(0.05)
 DESIGN_MISS_LIMIT_M = 1.0e3  # a designed nominal farther from the target did not converge
+# The design at the footprint's edge (design_at_the_edge), for a target beyond the reach of
+# the banks above but inside the vehicle's constant-bank footprint (a steep entry's lofted
+# skip near full lift up): first-entry banks from full lift up, second-entry banks down to
+# the tracking law's smallest bank (track_bank_min_deg). Such a design leaves the law little
+# bank for the dispersions; the study says how many runs it then brings to the target.
+EDGE_FIRST_ENTRY_BOUNDS_RAD = (0.0, math.radians(165.0))
+EDGE_PROFILE_BOUNDS_RAD = (math.radians(15.0), math.radians(165.0))
 
 
 class DesignResult(NamedTuple):
@@ -169,12 +177,15 @@ def design_with_fallback(problem: NominalProblem, entry: dict, vehicle: dict, **
     return d
 
 
-def design_by_profile(problem: NominalProblem, entry: dict, vehicle: dict) -> DesignResult:
+def design_by_profile(
+    problem: NominalProblem, entry: dict, vehicle: dict, bounds=None
+) -> DesignResult:
     """The design of :mod:`gnc_jax.guidance.entry.profile_solve`: sigma_1 fixed inside the
     window of banks that skip and land, the range met by a constant second-entry bank
     (``sigma_a = sigma_b``). Refuses (:class:`ScenarioError`, naming ``entry.range_km``) a
-    target no first-entry bank brackets, with the chute ranges the design reaches."""
-    sigma_1, a, b = solve_profile_design(problem)
+    target no first-entry bank brackets, with the chute ranges the design reaches.
+    ``bounds``: (first-entry, second-entry) bank bounds (rad); default the design's own."""
+    sigma_1, a, b = solve_profile_design(problem, *(bounds or ()))
     if sigma_1 is None:
         reach = (
             "no nominal of its scan skips and lands"
@@ -186,6 +197,34 @@ def design_by_profile(problem: NominalProblem, entry: dict, vehicle: dict) -> De
             f"reaches with a skip ({reach}; {conditions(entry, vehicle)})"
         )
     return DesignResult(sigma_1, a, a, b, [])
+
+
+def design_at_the_edge(
+    problem: NominalProblem, entry: dict, vehicle: dict, refusal: ScenarioError
+) -> DesignResult:
+    """:func:`design_by_profile` within ``EDGE_FIRST_ENTRY_BOUNDS_RAD`` and
+    ``EDGE_PROFILE_BOUNDS_RAD``, for a target the design's own banks do not reach
+    (``refusal``, the reach check's). Says so on stderr, with the banks it chose. If the edge
+    design fails too, raises ``refusal`` with what the edge design reaches added."""
+    lo1, hi1 = (f"{math.degrees(x):.0f}" for x in EDGE_FIRST_ENTRY_BOUNDS_RAD)
+    lo2, hi2 = (f"{math.degrees(x):.0f}" for x in EDGE_PROFILE_BOUNDS_RAD)
+    banks = f"first-entry banks {lo1}..{hi1} deg and second-entry banks {lo2}..{hi2} deg"
+    try:
+        d = design_by_profile(
+            problem, entry, vehicle, (EDGE_FIRST_ENTRY_BOUNDS_RAD, EDGE_PROFILE_BOUNDS_RAD)
+        )
+        require_design(problem, d, entry, vehicle)
+    except ScenarioError as e:
+        raise ScenarioError(f"{refusal}; with {banks}: {str(e).partition('; ')[2]}") from None
+    print(
+        f"gnc_jax: entry.range_km {entry['range_km']:g} km is beyond the design's first-entry "
+        f"banks; designed at the edge of the footprint with {banks}: first-entry bank "
+        f"{math.degrees(d.sigma_1):.1f} deg, second-entry bank {math.degrees(d.sigma_a):.1f} "
+        "deg. Little bank is left there for the dispersions.",
+        file=sys.stderr,
+        flush=True,
+    )
+    return d
 
 
 def require_design(problem: NominalProblem, d: "DesignResult", entry: dict, vehicle: dict):

@@ -20,7 +20,9 @@ constant second-entry bank sigma_2 in ``PROFILE_BOUNDS_RAD``:
 * sigma_2 is the root of "chute on the target", a bounded regula-falsi solve.
 
 Where no first-entry bank brackets the target, :func:`solve_profile_design` returns the chute
-ranges its scan reached (the reachable interval the refusal states).
+ranges its scan reached (the reachable interval the refusal states). Its bank bounds are
+arguments: the design at the footprint's edge
+(:func:`~gnc_jax.guidance.entry.design.design_at_the_edge`) scans wider ones.
 """
 
 import math
@@ -49,15 +51,15 @@ PROFILE_STEP_RAD = math.radians(5.0)  # bracketing step of the sigma_2 solve
 
 
 @jax.jit
-def _solve_profile_bank(problem: NominalProblem, sigma_1, guess):
-    """The constant second-entry bank (rad) putting the chute on the target with first-entry
-    bank ``sigma_1``, and the nominal's switch speed (m/s)."""
+def _solve_profile_bank(problem: NominalProblem, sigma_1, guess, lo, hi):
+    """The constant second-entry bank (rad, within ``lo`` .. ``hi``) putting the chute on the
+    target with first-entry bank ``sigma_1``, and the nominal's switch speed (m/s)."""
 
     def residual(s2):
         return range_error_m(problem, fly_nominal(problem, sigma_1, s2, s2, V_SWITCH_INIT_MPS))
 
     s2 = bounded_regula_falsi(
-        residual, guess, PROFILE_STEP_RAD, *PROFILE_BOUNDS_RAD, RANGE_TOLERANCE_M, 20, 30
+        residual, guess, PROFILE_STEP_RAD, lo, hi, RANGE_TOLERANCE_M, 20, 30
     ).x
     flight = fly_nominal(problem, sigma_1, s2, s2, V_SWITCH_INIT_MPS)
     return s2, flight_variables(flight.switch, problem.model.earth).speed_mps
@@ -83,14 +85,24 @@ def choose_first_entry_bank(err_m: np.ndarray, fate: np.ndarray) -> int | None:
     return int(rows[np.lexsort((np.abs(roots - math.pi / 2), -depth))[0]])
 
 
-def solve_profile_design(problem: NominalProblem):
+def solve_profile_design(
+    problem: NominalProblem,
+    first_entry_bounds=SIGMA_1_BOUNDS_RAD,
+    profile_bounds=PROFILE_BOUNDS_RAD,
+):
     """``(sigma_1, sigma_2, v_switch)`` of the design described in the module docstring, or
     ``(None, reach_lo_m, reach_hi_m)``: no first-entry bank brackets the target; the chute
     range errors (m, along track, > 0 beyond the target) of the scanned nominals that skip
-    and land span reach_lo_m .. reach_hi_m (NaN when none does)."""
-    lo, hi = SIGMA_1_BOUNDS_RAD
+    and land span reach_lo_m .. reach_hi_m (NaN when none does). ``first_entry_bounds``,
+    ``profile_bounds``: the banks (rad) sigma_1 and sigma_2 are sought within."""
+    lo, hi = first_entry_bounds
     banks = np.append(np.arange(lo, hi, FIRST_ENTRY_SCAN_STEP_RAD), hi)
-    flights = candidate_flights(problem, jnp.asarray(banks), jnp.asarray(PROFILE_SCAN_RAD))
+    scan = (
+        PROFILE_SCAN_RAD
+        if tuple(profile_bounds) == PROFILE_BOUNDS_RAD
+        else np.linspace(*profile_bounds, PROFILE_SCAN_RAD.size)
+    )
+    flights = candidate_flights(problem, jnp.asarray(banks), jnp.asarray(scan))
     err_m, fate = (np.asarray(x) for x in flights)
     row = choose_first_entry_bank(err_m, fate)
     if row is None:
@@ -98,6 +110,8 @@ def solve_profile_design(problem: NominalProblem):
         if landed.size == 0:
             return None, math.nan, math.nan
         return None, float(landed.min()), float(landed.max())
-    guess = float(np.interp(0.0, -err_m[row], PROFILE_SCAN_RAD))
-    s2, v_switch = _solve_profile_bank(problem, jnp.asarray(banks[row]), jnp.asarray(guess))
+    guess = float(np.interp(0.0, -err_m[row], scan))
+    s2, v_switch = _solve_profile_bank(
+        problem, jnp.asarray(banks[row]), jnp.asarray(guess), *map(jnp.asarray, profile_bounds)
+    )
     return float(banks[row]), float(s2), float(v_switch)

@@ -82,7 +82,7 @@ class CapsuleSimulation(eqx.Module):
     ratio_filter_gain: Scalar  # per control step, for the measured drag/lift ratios
     hold_bank_rad: Scalar  # attitude held before guidance starts
     chute_altitude_m: Scalar  # the chute deploys (the flight ends) below it
-    miss_limit_m: Scalar  # a larger downrange or crossrange miss: status out_of_domain
+    miss_limit_m: Scalar  # delivery tolerance: a larger downrange or crossrange miss reads missed
     dt_s: float = eqx.field(static=True, default=0.5)
     substeps: int = eqx.field(static=True, default=2)  # truth steps per control step
     n_control: int = eqx.field(static=True, default=2400)
@@ -401,11 +401,11 @@ def _outcome(
     """Chute-point errors against the nominal entry -> target track, loads, the law's log.
 
     Status, by precedence: ``skip_out`` (climbed above the law's skip-out altitude),
-    ``time_out`` (no chute crossing within ``max_time_s``), ``out_of_domain`` (a downrange or
-    crossrange miss beyond ``miss_limit_m``: the run lost the target, whether its corrector
+    ``time_out`` (no chute crossing within ``max_time_s``), ``missed`` (a downrange or
+    crossrange miss beyond ``miss_limit_m``, the delivery tolerance, whether its corrector
     converged or not; a dispersed vehicle that cannot reach the target ends here), then
-    ``no_convergence`` (the last corrector cycle failed, the chute point within the miss
-    limit), else ``ok``."""
+    ``no_convergence`` (the last corrector cycle failed, the chute point within the
+    tolerance), else ``ok``."""
     earth, f, g = sim.earth, c.tally, c.law
     log = g.log
     nominal_start = unit(entry_state_from_conditions(sim.entry, earth).r)
@@ -444,7 +444,7 @@ def _outcome(
             (~c.truth.done, Status.time_out),
             (
                 jnp.maximum(jnp.abs(along), jnp.abs(cross)) * r_e_km * 1e3 > sim.miss_limit_m,
-                Status.out_of_domain,
+                Status.missed,
             ),
             (g.last_status != RootStatus.ok, Status.no_convergence),
         ),

@@ -111,3 +111,30 @@ def test_a_target_beyond_every_skip_is_refused_with_the_reachable_interval(bound
     lo, hi = (float(x) for x in re.search(r"\((\d+) \.\. (\d+) km;", text).groups())
     # the interval holds the 4000 km target the same vehicle reaches (test above)
     assert lo < 4000.0 < hi < 15000.0
+
+
+def test_a_target_beyond_the_designs_banks_is_designed_at_the_edge_of_the_footprint(capsys):
+    """The packaged capsule at -7.1 deg reaches 10,000 km only by a lofted skip near full lift
+    up (its constant-bank footprint ends at 10,083 km): the design's own first-entry banks
+    refuse it, the edge design puts the chute on it with a bank below them."""
+    problem, cfg = _problem(["entry.fpa_deg=-7.1", "entry.range_km=10000"])
+    with pytest.raises(gj.ScenarioError) as e:
+        reach.require_reachable(problem, cfg["entry"], cfg["vehicle"])
+    assert str(e.value).startswith("entry.range_km: 10000 km; allowed:")
+    d = design.design_at_the_edge(problem, cfg["entry"], cfg["vehicle"], e.value)
+    assert d.sigma_1 < nominal.SIGMA_1_BOUNDS_RAD[0]
+    assert design.EDGE_PROFILE_BOUNDS_RAD[0] <= d.sigma_a == d.sigma_b
+    flight = nominal.fly_nominal(problem, d.sigma_1, d.sigma_a, d.sigma_b, d.v_switch)
+    assert int(nominal.fate_of(flight)) == nominal.SKIP_LANDS
+    assert abs(float(nominal.range_error_m(problem, flight))) < design.DESIGN_MISS_LIMIT_M
+    assert "designed at the edge of the footprint" in capsys.readouterr().err
+    # beyond the footprint too: refused, the edge design's reach added to the refusal
+    far = _problem(["entry.fpa_deg=-7.1", "entry.range_km=12000"])[0]
+    with pytest.raises(gj.ScenarioError) as e2:
+        design.design_at_the_edge(
+            far, dict(cfg["entry"], range_km=12000.0), cfg["vehicle"], e.value
+        )
+    text = str(e2.value)
+    assert "\n" not in text and "second-entry banks 15..165 deg: allowed:" in text
+    hi = float(re.search(r"\(\d+ \.\. (\d+) km;", text.rpartition("deg: ")[2]).group(1))
+    assert 10000.0 < hi < 12000.0
