@@ -15,7 +15,9 @@ gradient in ``P`` parameters whatever form they take (a schedule's knots), on th
 closed loop (0: the gains themselves). Each (system, mode, P) runs in its own process so that
 the peak resident memory (``ru_maxrss``) is its own; compile time apart, best of 2 after the
 compilation, ``block_until_ready``; the compiled program's temp memory from
-``memory_analysis``. The plain run (``value``) is the baseline, printed as a ratio.
+``memory_analysis``; the process's CPU time beside the wall time (on a shared machine the
+CPU time of the one-core program is the steadier figure). The plain run (``value``) is the
+baseline, printed as a ratio.
 """
 
 import argparse
@@ -72,11 +74,12 @@ def measure(system_name, mode, runs, short, n_params):
     t0 = time.perf_counter()
     compiled = jax.jit(fn).lower(theta).compile()
     compile_s = time.perf_counter() - t0
-    best = float("inf")
+    best = cpu = float("inf")
     for _ in range(2):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         jax.block_until_ready(compiled(theta))
         best = min(best, time.perf_counter() - t0)
+        cpu = min(cpu, time.process_time() - c0)
     stats = compiled.memory_analysis()
     return dict(
         system=system_name,
@@ -86,6 +89,7 @@ def measure(system_name, mode, runs, short, n_params):
         mode=mode,
         runs=runs,
         seconds=best,
+        cpu_s=cpu,
         compile_s=compile_s,
         temp_mb=stats.temp_size_in_bytes / 1e6,
         peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3,
@@ -116,14 +120,16 @@ def main():
                 base = next((r for r in rows if r["system"] == name and r["mode"] == "value"), None)
                 ratio = (
                     f" ({row['seconds'] / base['seconds']:.1f}x value time, "
+                    f"{row['cpu_s'] / base['cpu_s']:.1f}x its CPU time, "
                     f"{row['peak_rss_mb'] / base['peak_rss_mb']:.1f}x value peak RSS)"
                     if base
                     else ""
                 )
                 print(
                     f"{row['scenario']:<26} {row['params']:>2} params {mode:<8} {row['runs']} "
-                    f"runs: {row['seconds']:.3g} s{ratio}, compile {row['compile_s']:.0f} s, "
-                    f"temp {row['temp_mb']:.1f} MB, peak RSS {row['peak_rss_mb']:.0f} MB",
+                    f"runs: {row['seconds']:.3g} s (CPU {row['cpu_s']:.3g} s){ratio}, "
+                    f"compile {row['compile_s']:.0f} s, temp {row['temp_mb']:.1f} MB, "
+                    f"peak RSS {row['peak_rss_mb']:.0f} MB",
                     flush=True,
                 )
 

@@ -6,15 +6,17 @@ temperatures, hard-logic checks and progress records.
 ``jax.jacfwd`` (one tangent per parameter, vectorised), ``"reverse"`` is ``jax.grad`` through
 the loops the system sets up for it (:meth:`~gnc_jax.systems.AbstractSystem.reverse_mode`):
 the impactor checkpoints each image step of its scan (one loop state kept per image, an
-image's control steps recomputed on the way back); the capsule flies its cycles and its
-corrector's prediction rounds in equinox's checkpointed ``while_loop`` (the same trip counts
-and arithmetic as its ``lax.while_loop``, bounded memory). ``"auto"`` (the default) takes
+image's control steps recomputed on the way back, each of them checkpointed in turn); the
+capsule flies its cycles and its corrector's prediction rounds in equinox's checkpointed
+``while_loop`` (the same trip counts and arithmetic as its ``lax.while_loop``, bounded
+memory). ``"auto"`` (the default) takes
 reverse mode from :data:`REVERSE_FROM` parameters on. Measured with
 ``benchmarks/tune_gradient.py`` (256 runs, one step, compile apart, the shared 2-core machine
 at load 3-4): deep-impact-los, value 0.18-0.26 s; forward mode 1.1 / 7.7 s for 2 / 32
-parameters (about 0.66 s + 0.22 s per parameter); reverse mode 3.0 s whatever the number
-(17x a value), peak RSS 2.1x the value's against 1.4-1.5x for forward mode. The crossover is
-at about 11 parameters: forward mode for a law's few gains, reverse mode for schedules.
+parameters (about 0.66 s + 0.22 s per parameter); reverse mode 11-12x a value whatever the
+number (CPU time at load 8-11), peak RSS 2.1x the value's against 1.4-1.5x for forward mode.
+The crossover is at about 11 parameters: forward mode for a law's few gains, reverse mode for
+schedules.
 
 **Gradient-free baseline** (``method="es"``): an antithetic evolution strategy in the same
 ``theta`` with the same optimiser, evaluated with the hard logic; each generation flies

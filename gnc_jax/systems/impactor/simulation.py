@@ -93,8 +93,10 @@ def run(
 
     Each image step is checkpointed: reverse mode keeps one loop state per image and
     recomputes an image's control steps on the way back, so its memory is that of one image
-    interval plus a carry per image instead of every control step's residuals. Without
-    differentiation the checkpoint is inlined: the evaluation is unchanged."""
+    interval plus a carry per image instead of every control step's residuals; the control
+    steps are checkpointed inside it (:func:`~.step.image_step`), so that recomputation keeps
+    one loop state per control step. Without differentiation the checkpoints are inlined: the
+    evaluation is unchanged."""
     step = jax.checkpoint(
         functools.partial(image_step, sim, law, key, draws, record), prevent_cse=False
     )

@@ -208,7 +208,8 @@ def test_camera_misalignment_acts_as_an_unknown_attitude_bias(monkeypatch):
 
 def test_reverse_mode_through_the_checkpointed_loop_matches_forward_mode_and_differences():
     """The relaxed LOS objective's gradient in both gains: reverse mode (through the
-    checkpointed image steps) equals forward mode, and both match central differences."""
+    checkpointed image steps and, inside them, the checkpointed control steps) equals forward
+    mode, and both match central differences."""
     import jax
     import jax.numpy as jnp
 
