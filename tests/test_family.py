@@ -163,12 +163,14 @@ def test_gradient_of_a_tunable_leaf_matches_central_differences(name, law):
 
 @pytest.mark.parametrize("name, law", TUNABLE_CASES)
 def test_new_gain_values_reuse_the_compiled_study(name, law):
+    """A new gain value runs on the executable the scenario's study compiled (4 runs on all
+    devices, as in the chunking test above: nothing is compiled in this test)."""
     leaves = tunables(name, law)
     scenario = example(name, law)
     value = scenario[leaves[0]]
-    a = gj.run_study(scenario, runs=2, seed=0, progress=False)
+    a = gj.run_study(scenario, runs=4, seed=0, progress=False)
     b = gj.run_study(
-        scenario.with_overrides({leaves[0]: value * 0.8}), runs=2, seed=0, progress=False
+        scenario.with_overrides({leaves[0]: value * 0.8}), runs=4, seed=0, progress=False
     )
     assert b.compile_s == 0.0  # gains are arguments of the executable, not constants
     assert not all(np.array_equal(a.outcomes[f], b.outcomes[f]) for f in a.outcomes)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import gnc_jax as gj
+from gnc_jax._numerics import for_platform, loop_shape, using_loop_shape
 from gnc_jax.dynamics.entry import EntryConditions, entry_state_from_conditions
 from gnc_jax.guidance.base import family_of
 from gnc_jax.guidance.entry.base import (
@@ -281,41 +282,69 @@ def test_corrector_rounds_equal_the_slot_wise_corrector(law_and_ctx):
             np.testing.assert_allclose(getattr(batched, name)[i], getattr(one, name), rtol=1e-9)
 
 
-def test_checkpointed_corrector_equals_the_while_loop_and_reverses_to_forward_mode(law_and_ctx):
+def assert_same_solve(a, b):
+    """The same solve: statuses, counts and step costs identical, floats to the slot-wise test's
+    1e-9 (two programs of the same arithmetic differ by XLA's fusion only: 2e-16 relative in a
+    bank, 3e-12 in a secant slope, a difference quotient; a wrong step or a missed round moves a
+    solution by far more)."""
+    for name in a._fields:
+        x, y = np.asarray(getattr(a, name)), np.asarray(getattr(b, name))
+        if np.issubdtype(y.dtype, np.floating):
+            np.testing.assert_allclose(x, y, rtol=1e-9, atol=1e-9, err_msg=name)
+        else:
+            np.testing.assert_array_equal(x, y, err_msg=name)
+
+
+def test_corrector_loop_kinds_and_layouts_equal_the_while_loop_and_reverse_to_forward_mode(
+    law_and_ctx,
+):
     """The corrector's rounds as equinox's checkpointed ``while_loop`` (``loop_kind =
-    "checkpointed"``, what the capsule flies in reverse mode) and as a masked scan of their
-    bound (``"fixed"``) return what the ``lax`` ``while_loop`` returns, bit for bit, at the
-    cycles of a flight, batched; and the reverse-mode derivative of the solution and its
-    predicted crossrange with respect to the speed at the cycle equals the forward-mode
-    derivative of the ``lax`` loop."""
+    "checkpointed"``, what the capsule flies in reverse mode), as a masked scan of their bound
+    (``"fixed"``) and in an accelerator's layout (``LoopShape.early_exit`` false: a round's
+    predictor steps a masked scan of ``ROUND_STEPS`` unrolled whole, instead of a
+    ``while_loop`` that stops when every run's prediction has ended) return what the ``lax``
+    ``while_loop`` returns in the CPU's layout at the cycles of a flight, batched; and the
+    reverse-mode derivative of the solution and its predicted crossrange with respect to the
+    speed at the cycle equals the forward-mode derivative of the ``lax`` loop. The ``lax``
+    loop's values come with their forward-mode derivative and the checkpointed loop's with
+    their reverse-mode one, one program each (:func:`assert_same_solve`). The capsule's closed
+    loop in the accelerator's layout otherwise: tests/test_loop_shape.py."""
     _, law, ctx = law_and_ctx
     y, t, up, sigma, model = _corrector_cycles(law_and_ctx, every=6)
     start = jnp.asarray(sigma + np.resize(np.radians([0.0, 2.0, -7.0]), len(sigma)))
-
-    def solve(kind, scale, y, t, up, s0, m):
-        y = y._replace(v=y.v * scale)
-        res = correct(law, y, t, up, s0, m, ctx.target_fixed, jnp.asarray(True), loop_kind=kind)
-        return res
-
     runs = (y, t, up, start, model)
-    lax_ = jax.jit(jax.vmap(lambda *a: solve("lax", 1.0, *a)))(*runs)
-    ckpt = jax.jit(jax.vmap(lambda *a: solve("checkpointed", 1.0, *a)))(*runs)
-    fixed = jax.jit(jax.vmap(lambda *a: solve("fixed", 1.0, *a)))(*runs)  # no loop predicate
-    for name in lax_._fields:
-        np.testing.assert_array_equal(getattr(ckpt, name), getattr(lax_, name), err_msg=name)
-        np.testing.assert_array_equal(getattr(fixed, name), getattr(lax_, name), err_msg=name)
 
-    def summary(kind):
-        def f(scale):
-            res = jax.vmap(lambda *a: solve(kind, scale, *a))(*runs)
-            return jnp.sum(res.x) + 1e-6 * jnp.sum(res.aux)
+    def solve(kind, scale):
+        def one(y, t, up, s0, m):
+            y = y._replace(v=y.v * scale)
+            return correct(
+                law, y, t, up, s0, m, ctx.target_fixed, jnp.asarray(True), loop_kind=kind
+            )
 
-        return f
+        return jax.vmap(one)(*runs)
 
-    reverse = float(jax.jit(jax.grad(summary("checkpointed")))(1.0))
-    forward = float(jax.jit(jax.jacfwd(summary("lax")))(1.0))
+    def summary(res):
+        return jnp.sum(res.x) + 1e-6 * jnp.sum(res.aux)
+
+    def checkpointed(scale):
+        res = solve("checkpointed", scale)
+        return summary(res), res
+
+    lax_, tangent = jax.jit(lambda s: jax.jvp(lambda s: solve("lax", s), (s,), (1.0,)))(1.0)
+    (_, ckpt), reverse = jax.jit(jax.value_and_grad(checkpointed, has_aux=True))(1.0)
+    fixed = jax.jit(lambda: solve("fixed", 1.0))()  # no loop predicate
+    accelerator = for_platform("gpu", gj.get_system("capsule"))
+    assert not accelerator.early_exit and loop_shape().early_exit
+    with using_loop_shape(accelerator):  # a new function: JAX caches a trace, not the layout
+        unrolled = jax.jit(lambda: solve("lax", 1.0))()
+    assert len(set(np.asarray(lax_.n_evals_early_exit).tolist())) >= 2
+    assert_same_solve(ckpt, lax_)
+    assert_same_solve(fixed, lax_)
+    assert_same_solve(unrolled, lax_)
+
+    forward = float(summary(tangent))
     assert abs(forward) > 1e-3  # the solution depends on the speed
-    np.testing.assert_allclose(reverse, forward, rtol=1e-9)
+    np.testing.assert_allclose(float(reverse), forward, rtol=1e-9)
 
 
 def test_midpoint_bank_at_16_s_predicts_closer_to_fine_steps_than_the_held_bank_at_8_s(
