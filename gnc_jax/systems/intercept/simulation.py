@@ -108,9 +108,20 @@ def run(
     # update are then elementwise over the batch, with no stack (and, on a GPU, transpose
     # kernel) per vector and step. The same arithmetic, the same bits.
     state, rec = scan_in_blocks(
-        image_step, as_components(state), sim.n_images, DRAW_BLOCK, block_inputs
+        image_step, _by_component(state), sim.n_images, DRAW_BLOCK, block_inputs
     )
-    return as_arrays(state), flatten_trace(rec)  # (images, steps per image) -> guidance steps
+    return as_arrays(state), flatten_trace(rec)
+
+
+def _by_component(state: LoopState) -> LoopState:
+    """The run's 3-vectors as :class:`~gnc_jax._numerics.V3`; the target's ephemeris, the same
+    for every run (not batched under ``vmap``), stays a (3,) array: one loop value each, not
+    three."""
+    truth = state.truth
+    state = as_components(state._replace(truth=truth._replace(r_target=None, v_target=None)))
+    return state._replace(
+        truth=state.truth._replace(r_target=truth.r_target, v_target=truth.v_target)
+    )  # (images, steps per image) -> guidance steps
 
 
 def finish(
