@@ -26,9 +26,9 @@ def guidance_step(
     and the step's :class:`~.state.PNRecord` when ``record``. ``pointing_table``: the run's
     ignition pointing normals (:func:`~.draws.pointing_draws`).
 
-    The state's 3-vectors are :class:`~gnc_jax._numerics.V3` here (``simulation.run``): the
-    step is elementwise arithmetic on per-run scalars, with no 3-vector stacked under ``vmap``
-    (on a GPU each stack is a kernel of its own and a transpose)."""
+    The state's 3-vectors are (3,) arrays, or :class:`~gnc_jax._numerics.V3` in an
+    accelerator's layout (``simulation.run``): the step is then elementwise arithmetic on
+    per-run scalars, with no 3-vector stacked under ``vmap``."""
     ctx, err = sim.context, sim.errors
     dt = ctx.dt_s
     perfect = sim.nav_model == "perfect"

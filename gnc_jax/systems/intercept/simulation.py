@@ -27,7 +27,7 @@ import functools
 import jax
 import jax.numpy as jnp
 
-from ..._numerics import as_arrays, as_components, safe_norm
+from ..._numerics import as_arrays, as_components, loop_shape, safe_norm
 from ..._status import Status
 from ..._types import PRNGKeyArray
 from ...dynamics.intercept import coast_to_b_plane
@@ -104,12 +104,13 @@ def run(
         w = block_draws(key, b, sim.planar)
         return b * DRAW_BLOCK + jnp.arange(length), tuple(row[:length] for row in w)
 
-    # The loop carries its 3-vectors by component (V3): the guidance step and the filter's
-    # update are then elementwise over the batch, with no stack (and, on a GPU, transpose
-    # kernel) per vector and step. The same arithmetic, the same bits.
-    state, rec = scan_in_blocks(
-        image_step, _by_component(state), sim.n_images, DRAW_BLOCK, block_inputs
-    )
+    # On an accelerator the loop carries its 3-vectors by component (V3, LoopShape.components):
+    # the guidance step and the filter's update are then elementwise over the batch, with no
+    # stack and transpose kernel per vector and step (the same arithmetic, rounded alike to
+    # the family's batch_tolerance).
+    if loop_shape().components:
+        state = _by_component(state)
+    state, rec = scan_in_blocks(image_step, state, sim.n_images, DRAW_BLOCK, block_inputs)
     return as_arrays(state), flatten_trace(rec)
 
 
