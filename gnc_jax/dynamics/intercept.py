@@ -64,14 +64,12 @@ class InterceptDynamics(eqx.Module):
     def sun_gravity(self, r_helio: Vector3) -> Vector3:
         """Solar point-mass gravity at heliocentric ``r_helio``, m/s^2."""
         r2 = dot3(r_helio, r_helio)
-        # the scalar factor first: XLA computes (c r) / d as r (c / d) anyway (one division
-        # per run, not per component); written so, a vector held by component rounds alike
-        return (-self.mu_sun / (r2 * jnp.sqrt(r2))) * r_helio
+        return -self.mu_sun * r_helio / (r2 * jnp.sqrt(r2))
 
     def target_gravity(self, r: Vector3) -> Vector3:
         """Gravity of the target at ``r`` relative to its centre, m/s^2 (homogeneous sphere)."""
         rho = jnp.maximum(jnp.sqrt(dot3(r, r)), self.target_radius_m)
-        return (-self.mu_target / rho**3) * r
+        return -self.mu_target * r / rho**3
 
     def relative_gravity(self, r_target: Vector3, r: Vector3) -> Vector3:
         """Gravitational acceleration of the impactor minus that of the target, m/s^2.

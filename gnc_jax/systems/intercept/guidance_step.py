@@ -4,7 +4,7 @@ of the pulses fired."""
 
 import jax.numpy as jnp
 
-from ..._numerics import as_array, as_v3, computed_once, cross3, dot3, norm3, safe_norm
+from ..._numerics import V3, as_array, as_v3, computed_once, cross3, dot3, norm3, safe_norm
 from ...dynamics.impactor import perturb_direction
 from ...dynamics.intercept import drift_kick_drift_step
 from ...guidance.intercept.apn import AugmentedPNGuidance, PNNavigation
@@ -63,7 +63,8 @@ def guidance_step(
             tilted = d + pointing[0] * cross3(ctx.reference_normal, d)
             direction = tilted / norm3(tilted)
         else:
-            direction = as_v3(perturb_direction(as_array(d), pointing))
+            direction = perturb_direction(as_array(d), pointing)
+            direction = as_v3(direction) if isinstance(d, V3) else direction
         thrust = throttle * sim.engine.thrust_n * direction
         flow = throttle * sim.engine.mass_flow(1.0)
         return direction, thrust, drift_kick_drift_step(sim.dynamics, truth, thrust, flow, dt)
