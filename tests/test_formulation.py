@@ -167,6 +167,52 @@ def test_v3_arithmetic_matches_arrays():
     assert as_v3(va) is va and as_array(a) is a
 
 
+def test_vector_helpers_keep_the_callers_layout_and_its_bits():
+    """cross3, sub3, axpy3, matvec3 and safe_unit return a V3 for a V3 operand and a (3,)
+    array otherwise, with the same bits, under jit and vmap (an intercept carries its vectors
+    by component on the strength of it); the layout trees convert back and forth."""
+    from gnc_jax._numerics import (
+        V3,
+        as_array,
+        as_arrays,
+        as_components,
+        axpy3,
+        cross3,
+        matvec3,
+        safe_unit,
+        sub3,
+    )
+
+    rng = np.random.default_rng(7)
+    a, b = jnp.asarray(rng.normal(size=(16, 3))), jnp.asarray(rng.normal(size=(16, 3)))
+    a = a.at[0].set(0.0)  # safe_unit's fallback
+    m, s = jnp.asarray(rng.normal(size=(3, 3))), jnp.asarray(rng.normal(size=16))
+    fallback = jnp.array([0.0, 0.0, 1.0])
+
+    def helpers(a, b, s, by_component):
+        a, b = (V3(*a), V3(*b)) if by_component else (a, b)
+        out = (
+            cross3(a, b),
+            cross3(fallback, a),
+            sub3(a, b),
+            axpy3(s, a, b),
+            matvec3(m, a),
+            safe_unit(a, fallback),
+        )
+        assert all(isinstance(x, V3) == by_component for x in out)
+        return tuple(as_array(x) for x in out)
+
+    for want, got in zip(
+        jax.jit(jax.vmap(lambda *x: helpers(*x, False)))(a, b, s),
+        jax.jit(jax.vmap(lambda *x: helpers(*x, True)))(a, b, s),
+    ):
+        np.testing.assert_array_equal(got, want)
+    tree = dict(r=a[1], p=(s[0], s[1]), q=jnp.zeros(2))
+    comp = as_components(tree)
+    assert isinstance(comp["r"], V3) and comp["q"].shape == (2,)
+    np.testing.assert_array_equal(as_arrays(comp)["r"], a[1])
+
+
 def test_computed_once_fences_with_an_integer_live_value():
     """``i == i`` of an integer folds to true in XLA, which would inline the branch and fence
     nothing: computed_once compares a float, so the conditional stays in the program."""

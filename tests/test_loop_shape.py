@@ -63,7 +63,9 @@ def test_platform_defaults_and_override():
     assert for_platform("gpu") == ACCELERATOR
     # a system may declare its own accelerator layout; the CPU's stays the platform's
     intercept = gj.get_system("intercept")
-    assert for_platform("gpu", intercept) == LoopShape(fence=False, unroll=8, early_exit=False)
+    assert for_platform("gpu", intercept) == LoopShape(
+        fence=False, unroll=8, early_exit=False, components=True
+    )
     assert for_platform("gpu", gj.get_system("impactor")) == for_platform("gpu")
     assert for_platform("cpu", intercept) == for_platform("cpu")
     assert loop_shape() == for_platform("cpu")  # CI's backend

@@ -24,7 +24,7 @@ from typing import NamedTuple
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._numerics import dot3
+from .._numerics import V3, dot3
 from .._types import Scalar, Vector3
 from ..geometry.bplane import b_plane_crossing
 from ..integrate import integrate_fixed
@@ -64,11 +64,15 @@ class InterceptDynamics(eqx.Module):
     def sun_gravity(self, r_helio: Vector3) -> Vector3:
         """Solar point-mass gravity at heliocentric ``r_helio``, m/s^2."""
         r2 = dot3(r_helio, r_helio)
+        if isinstance(r_helio, V3):  # by component: one division per run, not three
+            return (-self.mu_sun / (r2 * jnp.sqrt(r2))) * r_helio
         return -self.mu_sun * r_helio / (r2 * jnp.sqrt(r2))
 
     def target_gravity(self, r: Vector3) -> Vector3:
         """Gravity of the target at ``r`` relative to its centre, m/s^2 (homogeneous sphere)."""
         rho = jnp.maximum(jnp.sqrt(dot3(r, r)), self.target_radius_m)
+        if isinstance(r, V3):  # by component: see sun_gravity
+            return (-self.mu_target / rho**3) * r
         return -self.mu_target * r / rho**3
 
     def relative_gravity(self, r_target: Vector3, r: Vector3) -> Vector3:

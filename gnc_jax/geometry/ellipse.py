@@ -2,7 +2,6 @@
 
 import jax.numpy as jnp
 
-from .._numerics import matmul
 from .._types import Array, Covariance6, Float, Matrix3, Scalar
 
 
@@ -23,11 +22,31 @@ def b_plane_position_covariance(p0: Covariance6, t_go, c_bi: Matrix3) -> Float[A
     """D: the (T, R) position block of P_f in the B-plane frame (seed 000 eq. 10), m^2.
 
     Computed without forming the 6x6 product: position block of Phi P Phi^T is
-    P_rr + t_go (P_rv + P_vr) + t_go^2 P_vv.
+    P_rr + t_go (P_rv + P_vr) + t_go^2 P_vv. ``p0`` is read entry by entry (``p0[i, j]``), so
+    it may be a dense 6x6 array or the packed covariance a filter carries
+    (``navigation.packed_ekf.PackedCovariance``): under ``vmap`` the packed entries are read
+    where they are, with no 6x6 matrix assembled from them (its stacking costs a copy per
+    entry on a GPU). The products are :func:`~gnc_jax._numerics.matmul`'s, term for term.
     """
-    prr = p0[:3, :3] + t_go * (p0[:3, 3:] + p0[3:, :3]) + t_go**2 * p0[3:, 3:]
+    t2 = t_go**2
+    prr = [
+        [p0[i, j] + t_go * (p0[i, j + 3] + p0[i + 3, j]) + t2 * p0[i + 3, j + 3] for j in range(3)]
+        for i in range(3)
+    ]
     tr = c_bi[1:]
-    return matmul(matmul(tr, prr), tr.T)
+    a = [[_row_times(tr, k, [prr[l][j] for l in range(3)]) for j in range(3)] for k in range(2)]
+    return jnp.stack(
+        [
+            jnp.stack([_row_times(a, k, [tr[m, l] for l in range(3)], True) for m in range(2)])
+            for k in range(2)
+        ]
+    )
+
+
+def _row_times(a, k, column, nested=False):
+    """Row ``k`` of ``a`` times ``column``, summed as :func:`~gnc_jax._numerics.matmul` does."""
+    row = a[k] if nested else [a[k, l] for l in range(len(column))]
+    return sum(row[l] * column[l] for l in range(1, len(column))) + row[0] * column[0]
 
 
 def error_ellipse(d: Float[Array, "2 2"]) -> tuple[Scalar, Scalar, Scalar]:

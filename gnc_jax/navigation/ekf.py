@@ -49,6 +49,8 @@ def navigation_lost(n_images, images_used, innovations_outside):
 
 class NavEstimate(NamedTuple):
     x: State6  # (r m, v m/s)
+    # 6x6, or a filter's packed form (``packed_ekf.PackedCovariance``) where the reader reads
+    # it entry by entry (``p[i, j]`` for Python ints)
     p: Covariance6
 
     @property

@@ -137,6 +137,25 @@ def test_covariance_mapping_matches_monte_carlo_and_full_product():
     np.testing.assert_allclose(np.cov((pos_f @ tr.T).T), d, rtol=0.03, atol=1e-6 * np.abs(d).max())
 
 
+def test_b_plane_covariance_reads_a_packed_covariance_as_the_dense_one():
+    """A filter's packed covariance (21 entries) gives the dense matrix's D to the last bit,
+    under jit and vmap, and D against the full product Phi P Phi^T."""
+    from gnc_jax.navigation.packed_ekf import pack
+
+    rng = np.random.default_rng(9)
+    a = rng.normal(size=(4, 6, 6)) * np.array([100, 100, 100, 0.1, 0.1, 0.1])[:, None]
+    p0 = jnp.asarray(a @ np.swapaxes(a, 1, 2))
+    t_go = jnp.asarray(rng.uniform(1e3, 1e4, size=4))
+    c = b_plane_frame(jnp.array([-1.0, 0.1, 0.0]), jnp.array([0.0, 0.0, 1.0]))
+    dense = jax.jit(jax.vmap(lambda p, t: b_plane_position_covariance(p, t, c)))(p0, t_go)
+    packed = jax.jit(jax.vmap(lambda p, t: b_plane_position_covariance(pack(p), t, c)))(p0, t_go)
+    np.testing.assert_array_equal(packed, dense)
+    tr = np.asarray(c)[1:]
+    for k in range(4):
+        pf = np.asarray(map_covariance(p0[k], t_go[k]))
+        np.testing.assert_allclose(dense[k], tr @ pf[:3, :3] @ tr.T, rtol=1e-11)
+
+
 def test_geometry_vmaps():
     rho = jnp.ones((5, 3)) * jnp.arange(1.0, 6.0)[:, None] + jnp.array([1e6, 0, 0])
     rho_dot = jnp.tile(jnp.array([-1e4, 1.0, 0.5]), (5, 1))

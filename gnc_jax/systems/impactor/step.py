@@ -8,12 +8,12 @@ import functools
 import jax
 import jax.numpy as jnp
 
-from ..._numerics import V3, as_array, as_v3, computed_once, loop_shape
+from ..._numerics import as_array, as_arrays, as_components, computed_once, loop_shape
 from ..._random import fold_in
 from ..._types import Array
 from ...dynamics.impactor import rk4, tilt_direction
 from ...navigation.ekf import NIS_BOUND_2DOF, NavEstimate
-from ...navigation.packed_ekf import apply_gain, propagate_packed, unpack
+from ...navigation.packed_ekf import apply_gain, propagate_packed
 from ..loop import LoopState
 from .draws import N_BURN_INTERVALS, ImpactorDraws, image_draws, image_key
 from .navigation import accel_noise, camera_attitudes, image_update
@@ -168,7 +168,9 @@ def begin_interval(
         attitudes,
     )
     p = apply_gain(estimate.p, gain.terms)
-    nav = NavEstimate(jnp.concatenate([gain.r, gain.v]), unpack(p))
+    # The covariance in the packed form the filter carries: a law's plan reads its entries
+    # (``nav.p[i, j]``) where they are; no 6x6 matrix is assembled for it.
+    nav = NavEstimate(jnp.concatenate([gain.r, gain.v]), p)
     law_state = law.plan(state.law, nav, t, ctx)
     outside = (meas.valid & (gain.nis > NIS_BOUND_2DOF)).astype(tally.innovations_outside.dtype)
     los_error_sq = jnp.where(meas.valid, jnp.sum((meas.z - meas.z_true) ** 2), 0.0)
@@ -222,18 +224,8 @@ def end_interval(sim: ImpactorSimulation, state: LoopState, row) -> LoopState:
     )
 
 
-def components(tree):
-    """Every 3-vector of ``tree`` as a :class:`V3`: the control steps' layout."""
-    is_v3 = lambda x: isinstance(x, V3)  # noqa: E731
-    return jax.tree_util.tree_map(
-        lambda x: x if is_v3(x) or jnp.shape(x) != (3,) else as_v3(x), tree, is_leaf=is_v3
-    )
-
-
-def arrays(tree):
-    """Every :class:`V3` of ``tree`` as a (3,) array: the image steps' layout."""
-    is_v3 = lambda x: isinstance(x, V3)  # noqa: E731
-    return jax.tree_util.tree_map(lambda x: as_array(x), tree, is_leaf=is_v3)
+components = as_components  # the control steps' layout
+arrays = as_arrays  # the image steps' layout
 
 
 __all__ = ["arrays", "begin_interval", "components", "control_step", "end_interval", "image_step"]

@@ -4,7 +4,7 @@ of the pulses fired."""
 
 import jax.numpy as jnp
 
-from ..._numerics import computed_once, cross3, dot3, norm3, safe_norm
+from ..._numerics import V3, as_array, as_v3, computed_once, cross3, dot3, norm3, safe_norm
 from ...dynamics.impactor import perturb_direction
 from ...dynamics.intercept import drift_kick_drift_step
 from ...guidance.intercept.apn import AugmentedPNGuidance, PNNavigation
@@ -24,7 +24,11 @@ def guidance_step(
 ) -> tuple[LoopState, PNRecord | None]:
     """The loop state one guidance step (``sim.context.dt_s``) after ``state`` at time ``t``,
     and the step's :class:`~.state.PNRecord` when ``record``. ``pointing_table``: the run's
-    ignition pointing normals (:func:`~.draws.pointing_draws`)."""
+    ignition pointing normals (:func:`~.draws.pointing_draws`).
+
+    The state's 3-vectors are (3,) arrays, or :class:`~gnc_jax._numerics.V3` in an
+    accelerator's layout (``simulation.run``): the step is then elementwise arithmetic on
+    per-run scalars, with no 3-vector stacked under ``vmap``."""
     ctx, err = sim.context, sim.errors
     dt = ctx.dt_s
     perfect = sim.nav_model == "perfect"
@@ -35,13 +39,16 @@ def guidance_step(
         r_hat, v_hat = state.estimate.r_hat, state.estimate.v_hat
     navsol = PNNavigation(r_hat, v_hat, truth.r_target)
 
-    def law_and_gravity(law_state, nav):
+    def law_and_gravity(law_state_in, nav):
         # The filter's modelled gravity at the estimate is the law's A_r (eq. 10) before its
         # projection: computed in the same branch, XLA evaluates it once for both.
-        command, law_state = law.step(law_state, nav, t, ctx)
+        command, law_state = law.step(law_state_in, nav, t, ctx)
         g = None if perfect else ctx.dynamics.relative_gravity(nav.r_target, nav.r)
-        if not record:  # the command and N are diagnostics of the trace only
-            law_state = law_state._replace(command_mps2=jnp.zeros(3), coefficient=jnp.zeros(()))
+        if not record:  # the command and N are diagnostics of the trace only: carried
+            # unchanged, loop invariants that XLA drops from the loop
+            law_state = law_state._replace(
+                command_mps2=law_state_in.command_mps2, coefficient=law_state_in.coefficient
+            )
         return command, law_state, g
 
     # Once per step, not once per consumer loop (see _numerics.computed_once).
@@ -56,7 +63,8 @@ def guidance_step(
             tilted = d + pointing[0] * cross3(ctx.reference_normal, d)
             direction = tilted / norm3(tilted)
         else:
-            direction = perturb_direction(d, pointing)
+            direction = perturb_direction(as_array(d), pointing)
+            direction = as_v3(direction) if isinstance(d, V3) else direction
         thrust = throttle * sim.engine.thrust_n * direction
         flow = throttle * sim.engine.mass_flow(1.0)
         return direction, thrust, drift_kick_drift_step(sim.dynamics, truth, thrust, flow, dt)
@@ -89,8 +97,8 @@ def guidance_step(
     )
     rec = None
     if record:
-        r_m = truth.r
-        rec = PNRecord(t, on, law_state.command_mps2, law_state.coefficient, norm3(r_m), r_m)
+        r_m, a_cmd = as_array(truth.r), as_array(law_state.command_mps2)
+        rec = PNRecord(t, on, a_cmd, law_state.coefficient, norm3(r_m), r_m)
     return new, rec
 
 

@@ -9,7 +9,7 @@ in the packed, sequential form of ``navigation.packed_ekf``.
 import jax
 import jax.numpy as jnp
 
-from ..._numerics import computed_once
+from ..._numerics import as_array, computed_once
 from ..._types import Array, Float, PRNGKeyArray, Vector3
 from ...navigation.camera import camera_axes
 from ...navigation.ekf import NavEstimate
@@ -67,11 +67,11 @@ def take_image(
     # The camera's axes as three row vectors, each product written per row: the stacked
     # matrix is built only for the front end's exposure (read row-wise it is never stored).
     rows = camera_axes(-r_hat, sim.context.reference_normal)
-    c_cam = jnp.stack(rows)
+    c_cam = jnp.stack([as_array(row) for row in rows])
     r_var = jnp.maximum(sim.model_attitude_rad, 1e-9) ** 2
     h_r, predicted = predict_los_packed(rows, r_hat, p, r_var)
-    nav = NavEstimate(jnp.concatenate([r_hat, v_hat]), unpack(p))
-    meas = sim.measurement(Exposure(-r_true, c_cam, c_cam), nav, predicted, w, key)
+    nav = NavEstimate(jnp.concatenate([as_array(r_hat), as_array(v_hat)]), unpack(p))
+    meas = sim.measurement(Exposure(-as_array(r_true), c_cam, c_cam), nav, predicted, w, key)
     angles = 1 if sim.planar else 2
     innovation = [meas.z[a] - predicted.z[a] for a in range(2)]
     return los_gain(r_hat, v_hat, p, h_r, innovation, r_var, angles, meas.valid)

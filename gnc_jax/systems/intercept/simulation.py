@@ -27,7 +27,7 @@ import functools
 import jax
 import jax.numpy as jnp
 
-from ..._numerics import safe_norm
+from ..._numerics import as_arrays, as_components, loop_shape, safe_norm
 from ..._status import Status
 from ..._types import PRNGKeyArray
 from ...dynamics.intercept import coast_to_b_plane
@@ -104,8 +104,25 @@ def run(
         w = block_draws(key, b, sim.planar)
         return b * DRAW_BLOCK + jnp.arange(length), tuple(row[:length] for row in w)
 
+    # On an accelerator the loop carries its 3-vectors by component (V3, LoopShape.components):
+    # the guidance step and the filter's update are then elementwise over the batch, with no
+    # stack and transpose kernel per vector and step (the same arithmetic, rounded alike to
+    # the family's batch_tolerance).
+    if loop_shape().components:
+        state = _by_component(state)
     state, rec = scan_in_blocks(image_step, state, sim.n_images, DRAW_BLOCK, block_inputs)
-    return state, flatten_trace(rec)  # (images, steps per image) -> guidance steps
+    return as_arrays(state), flatten_trace(rec)
+
+
+def _by_component(state: LoopState) -> LoopState:
+    """The run's 3-vectors as :class:`~gnc_jax._numerics.V3`; the target's ephemeris, the same
+    for every run (not batched under ``vmap``), stays a (3,) array: one loop value each, not
+    three."""
+    truth = state.truth
+    state = as_components(state._replace(truth=truth._replace(r_target=None, v_target=None)))
+    return state._replace(
+        truth=state.truth._replace(r_target=truth.r_target, v_target=truth.v_target)
+    )  # (images, steps per image) -> guidance steps
 
 
 def finish(

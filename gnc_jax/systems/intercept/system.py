@@ -244,8 +244,11 @@ class InterceptSystem(AbstractSystem):
     run_bytes: ClassVar[int] = 4_500  # the compiled batch's bytes per run on the CPU (4,484)
     # Latency-bound on a GPU (91,200 sequential steps for bennu-apn whatever the batch): 8
     # control steps per scan trip instead of 4 took 2,000 runs from 2.57 s to 2.29 s on an H100
-    # (16: 2.24 s, for twice the compile time); benchmarks/gpu_loops.py --sweep.
-    accelerator_loop_shape: ClassVar[Any] = LoopShape(fence=False, unroll=8, early_exit=False)
+    # (16: 2.24 s, for twice the compile time); benchmarks/gpu_loops.py --sweep. Its 3-vectors
+    # by component: no stack and transpose kernels per step (benchmarks/gpu_kernels.py).
+    accelerator_loop_shape: ClassVar[Any] = LoopShape(
+        fence=False, unroll=8, early_exit=False, components=True
+    )
 
     def steps_per_run(self, config):
         return intercept_steps(config)
