@@ -125,7 +125,10 @@ def _run(package: pathlib.Path, args, tag: str, round_: int) -> list[dict]:
     out = pathlib.Path(args.out).with_suffix(f".{tag}{round_}.json")
     cmd = [sys.executable, str(HERE), "--child", "--json", str(out)]
     cmd += ["--quick"] if args.quick else []
-    env = dict(os.environ, PYTHONPATH=str(package))
+    env = dict(
+        os.environ,
+        PYTHONPATH=os.pathsep.join(filter(None, [str(package), os.environ.get("PYTHONPATH", "")])),
+    )
     subprocess.run(cmd, env=env, check=True, cwd=package)
     return json.loads(out.read_text())
 
