@@ -11,11 +11,12 @@ capsule flies its cycles and its corrector's prediction rounds in equinox's chec
 ``while_loop`` (the same trip counts and arithmetic as its ``lax.while_loop``, bounded
 memory). ``"auto"`` (the default) takes
 reverse mode from :data:`REVERSE_FROM` parameters on. Measured with
-``benchmarks/tune_gradient.py`` (256 runs, one step, compile apart, the shared 2-core machine
-at load 3-4): deep-impact-los, value 0.18-0.26 s; forward mode 1.1 / 7.7 s for 2 / 32
-parameters (about 0.66 s + 0.22 s per parameter); reverse mode 11-12x a value whatever the
-number (CPU time at load 8-11), peak RSS 2.1x the value's against 1.4-1.5x for forward mode.
-The crossover is at about 11 parameters: forward mode for a law's few gains, reverse mode for
+``benchmarks/tune_gradient.py --only impactor --modes value,forward,reverse --params
+4,8,12,16`` (deep-impact-los, 256 runs, one step, compile apart, the idle 2-core machine,
+wall time): value 0.17 s; forward mode 1.02 / 1.71 / 2.36 / 2.34 s for 4 / 8 / 12 / 16
+parameters (about 0.35 s + 0.17 s per parameter); reverse mode 1.61-1.99 s whatever the
+number (10-12x a value), peak RSS 2.0x the value's against 1.4x for forward mode. The
+crossover is at about 9 parameters: forward mode for a law's few gains, reverse mode for
 schedules.
 
 **Gradient-free baseline** (``method="es"``): an antithetic evolution strategy in the same
@@ -41,7 +42,7 @@ import optax
 from .evaluation import _hard_objective
 from .problem import TuningProblem, heldout_indices, train_indices
 
-REVERSE_FROM = 12
+REVERSE_FROM = 10
 """``gradient="auto"`` takes reverse mode from this many tuned parameters on (the measured
 crossover: see the module docstring), forward mode below it."""
 
