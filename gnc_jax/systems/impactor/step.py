@@ -131,9 +131,9 @@ def image_step(
         prevent_cse=False,
     )
     inner, rec = jax.lax.scan(
-        step, state._replace(truth=components(state.truth)), inputs, unroll=loop_shape().unroll
+        step, state._replace(truth=as_components(state.truth)), inputs, unroll=loop_shape().unroll
     )
-    state = inner._replace(truth=arrays(inner.truth))
+    state = inner._replace(truth=as_arrays(inner.truth))
     return end_interval(sim, state, row), rec
 
 
@@ -224,8 +224,4 @@ def end_interval(sim: ImpactorSimulation, state: LoopState, row) -> LoopState:
     )
 
 
-components = as_components  # the control steps' layout
-arrays = as_arrays  # the image steps' layout
-
-
-__all__ = ["arrays", "begin_interval", "components", "control_step", "end_interval", "image_step"]
+__all__ = ["begin_interval", "control_step", "end_interval", "image_step"]

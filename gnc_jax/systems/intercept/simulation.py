@@ -111,7 +111,7 @@ def run(
     if loop_shape().components:
         state = _by_component(state)
     state, rec = scan_in_blocks(image_step, state, sim.n_images, DRAW_BLOCK, block_inputs)
-    return as_arrays(state), flatten_trace(rec)
+    return as_arrays(state), flatten_trace(rec)  # (images, steps per image) -> guidance steps
 
 
 def _by_component(state: LoopState) -> LoopState:
@@ -122,7 +122,7 @@ def _by_component(state: LoopState) -> LoopState:
     state = as_components(state._replace(truth=truth._replace(r_target=None, v_target=None)))
     return state._replace(
         truth=state.truth._replace(r_target=truth.r_target, v_target=truth.v_target)
-    )  # (images, steps per image) -> guidance steps
+    )
 
 
 def finish(
