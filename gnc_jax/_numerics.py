@@ -284,7 +284,8 @@ def _closure_converted(fn, args):
     out_tree = jax.tree_util.tree_structure(out)
 
     def call(*leaves):
-        hoisted, kept = iter(leaves[len(flat) :]), iter(consts)
+        hoisted = iter(leaves[len(flat) :])
+        kept = iter(c for c, t in zip(consts, traced) if not t)
         values = [next(hoisted) if t else next(kept) for t in traced]
         fun = jax.extend.core.jaxpr_as_fun(jax.extend.core.ClosedJaxpr(jaxpr, values))
         return jax.tree_util.tree_unflatten(out_tree, fun(*leaves[: len(flat)]))
