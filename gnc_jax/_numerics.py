@@ -10,6 +10,7 @@ import contextvars
 from typing import NamedTuple
 
 import jax
+import jax.extend
 import jax.numpy as jnp
 
 from ._types import Array, Float, Matrix3, Scalar, Vector3
@@ -228,7 +229,7 @@ def using_loop_shape(shape: LoopShape | None):
         _LOOP_SHAPE.reset(token)
 
 
-def computed_once(fn, live, *args):
+def computed_once(fn, live, *args, adjoint=None):
     """``fn(*args)``, computed once into memory before its consumers run.
 
     XLA on CPU fuses an elementwise producer into every consumer loop, so a guidance law
@@ -240,20 +241,127 @@ def computed_once(fn, live, *args):
     ``live`` must be a runtime scalar shared by the batch (e.g. the scan's time input), so
     that under ``vmap`` the predicate stays unbatched.
 
-    Differentiable in forward and reverse mode (a conditional is). Under a
-    :class:`LoopShape` without fences (a GPU's default) this is ``fn(*args)``.
+    ``adjoint``: how reverse mode crosses the fence. ``None``: as it crosses the conditional,
+    in forward and reverse mode; reverse mode then keeps the residuals of both branches and
+    transposes a conditional, whose pieces XLA cannot fuse with their neighbours.
+    ``"recompute"``: the backward pass recomputes ``fn`` and transposes it in one fence of
+    its own (the residuals are the arguments). ``"save"``: the forward pass computes ``fn``'s
+    residuals in its fence and the backward pass transposes them in another (for a ``fn``
+    that draws random numbers, which recomputing would draw again). Both are reverse mode
+    only (forward mode refuses them): a system sets them up in its
+    :meth:`~gnc_jax.systems.AbstractSystem.reverse_mode`. The value is the same either way.
+    Under a :class:`LoopShape` without fences (a GPU's default) this is ``fn(*args)``.
     """
     if not loop_shape().fence:
         return fn(*args)
+    # A floating-point comparison: XLA folds ``i == i`` to true for an integer ``i`` (and
+    # then inlines the branch, so nothing is fenced), but not for a float, which may be NaN.
+    live = jnp.asarray(live, jnp.float64)
+    if adjoint is None:
+        return _fenced(fn, live, *args)
+    if adjoint not in ("recompute", "save"):
+        raise ValueError(f"adjoint = {adjoint!r}: allowed None, 'recompute', 'save'")
+    return _fenced_with_adjoint(fn, live, args, adjoint == "save")
+
+
+def _fenced(fn, live, *args):
     out = jax.eval_shape(fn, *args)
 
     def skipped(*_):
         return jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), out)
 
-    # A floating-point comparison: XLA folds ``i == i`` to true for an integer ``i`` (and
-    # then inlines the branch, so nothing is fenced), but not for a float, which may be NaN.
-    live = jnp.asarray(live, jnp.float64)
     return jax.lax.cond(live == live, fn, skipped, *args)
+
+
+def _closure_converted(fn, args):
+    """``fn(*args)`` as ``call(*leaves)``: the leaves of ``args``, then the traced values ``fn``
+    closes over (a law's gains; a custom derivative sees only its arguments). Also, per leaf,
+    whether the value reads it, and the value's shapes."""
+    flat, tree = jax.tree_util.tree_flatten(args)
+    closed, out = jax.make_jaxpr(lambda *x: fn(*tree.unflatten(x)), return_shape=True)(*flat)
+    jaxpr, consts = closed.jaxpr, closed.consts
+    traced = [isinstance(c, jax.core.Tracer) for c in consts]
+    out_tree = jax.tree_util.tree_structure(out)
+
+    def call(*leaves):
+        hoisted = iter(leaves[len(flat) :])
+        kept = iter(c for c, t in zip(consts, traced) if not t)
+        values = [next(hoisted) if t else next(kept) for t in traced]
+        fun = jax.extend.core.jaxpr_as_fun(jax.extend.core.ClosedJaxpr(jaxpr, values))
+        return jax.tree_util.tree_unflatten(out_tree, fun(*leaves[: len(flat)]))
+
+    read = {id(v) for e in jaxpr.eqns for v in e.invars} | {id(v) for v in jaxpr.outvars}
+    hoisted_vars = [v for v, t in zip(jaxpr.constvars, traced) if t]
+    used = [id(v) in read for v in (*jaxpr.invars, *hoisted_vars)]
+    return call, [*flat, *(c for c, t in zip(consts, traced) if t)], used, out
+
+
+def _fenced_with_adjoint(fn, live, args, save):
+    """:func:`computed_once` with ``adjoint`` ``"save"`` (``save``) or ``"recompute"``."""
+    call, leaves, used, out = _closure_converted(fn, args)
+    out_leaves = jax.tree_util.tree_leaves(out)
+    inexact = [jnp.issubdtype(o.dtype, jnp.inexact) for o in out_leaves]
+    rule = {}  # set where the forward pass is traced, read where the backward pass is
+
+    def outputs(perturbed, x):
+        """``call`` of the perturbed leaves (the others as in ``x``), for ``jax.vjp``: the
+        floating-point outputs, and the others as its auxiliary output."""
+
+        def g(*d):
+            it = iter(d)
+            o = jax.tree_util.tree_leaves(
+                call(*[next(it) if p else v for v, p in zip(x, perturbed)])
+            )
+            return [v for v, f in zip(o, inexact) if f], [v for v, f in zip(o, inexact) if not f]
+
+        return g, [v for v, p in zip(x, perturbed) if p]
+
+    @jax.custom_vjp
+    def fence(live, *leaves):
+        return _fenced(call, live, *leaves)
+
+    def fwd(live, *leaves):
+        x = [leaf.value for leaf in leaves]
+        rule["perturbed"] = perturbed = [
+            leaf.perturbed and u and jnp.issubdtype(jnp.result_type(v), jnp.inexact)
+            for leaf, u, v in zip(leaves, used, x)
+        ]
+        if not save:
+            return _fenced(call, live.value, *x), (live.value, x)
+
+        def value_and_residuals(*x):
+            g, d = outputs(perturbed, x)
+            floats, pullback, others = jax.vjp(g, *d, has_aux=True)
+            residuals, rule["pullback"] = jax.tree_util.tree_flatten(pullback)
+            f, o = iter(floats), iter(others)
+            value = [next(f) if i else next(o) for i in inexact]
+            return jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(out), value), residuals
+
+        value, residuals = _fenced(value_and_residuals, live.value, *x)
+        return value, (live.value, residuals)
+
+    def bwd(res, ct):
+        live, saved = res
+        perturbed = rule["perturbed"]
+        zero = jax.custom_derivatives.SymbolicZero
+        ct = jax.tree_util.tree_leaves(ct, is_leaf=lambda c: isinstance(c, zero))
+        ct = [
+            jnp.zeros(o.shape, o.dtype) if isinstance(c, zero) else c
+            for c, o, i in zip(ct, out_leaves, inexact)
+            if i
+        ]
+
+        def transposed(ct, *saved):
+            if save:
+                return list(jax.tree_util.tree_unflatten(rule["pullback"], saved)(ct))
+            g, d = outputs(perturbed, saved)
+            return list(jax.vjp(lambda *d: g(*d)[0], *d)[1](ct))
+
+        grads = iter(_fenced(transposed, live, ct, *saved) if any(perturbed) else ())
+        return (None, *(next(grads) if p else None for p in perturbed))
+
+    fence.defvjp(fwd, bwd, symbolic_zeros=True)
+    return fence(live, *leaves)
 
 
 def _dot(x, y):

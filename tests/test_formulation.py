@@ -36,6 +36,41 @@ def test_computed_once_is_the_function_with_its_derivatives():
     np.testing.assert_allclose(got, jax.vmap(lambda x: fn(x, b)[0])(xs), rtol=0)
 
 
+def test_computed_once_reverse_mode_rules_are_the_functions_gradient():
+    """``adjoint="recompute"`` and ``"save"``: the plain function's value and gradient, through
+    a traced gain the function closes over (between constant arrays), an integer argument, a
+    random draw, an unused output, under vmap, scan and checkpoint."""
+    key, offset, scale = jax.random.key(3), jnp.asarray([0.2]), jnp.asarray([1.1])
+
+    def objective(gain, x0, adjoint):
+        def step(carry, t):
+            x, n = carry
+
+            def fn(x, n):
+                w = jax.random.normal(jax.random.fold_in(key, n))
+                y = jnp.sin(gain * (x + offset[0])) * scale[0] + 0.1 * w * x
+                return {"x": y, "n": n + 1, "unused": gain * x}
+
+            out = fn(x, n) if adjoint is None else computed_once(fn, t, x, n, adjoint=adjoint)
+            return (out["x"], out["n"]), None
+
+        def one(x):
+            (x, _), _ = jax.lax.scan(jax.checkpoint(step), (x, jnp.int32(0)), jnp.arange(4.0))
+            return x
+
+        return jnp.sum(jax.vmap(one)(x0) ** 2)
+
+    gain, x0 = jnp.asarray(1.3), jnp.linspace(0.2, 0.9, 3)
+    grad = jax.jit(jax.value_and_grad(objective, argnums=(0, 1)), static_argnums=2)
+    value, (g_gain, g_x0) = grad(gain, x0, None)
+    assert abs(float(g_gain)) > 0.01
+    for adjoint in ("recompute", "save"):
+        v, (gg, gx) = grad(gain, x0, adjoint)
+        np.testing.assert_allclose(v, value, rtol=0, err_msg=adjoint)
+        np.testing.assert_allclose(gg, g_gain, rtol=1e-13, err_msg=adjoint)
+        np.testing.assert_allclose(gx, g_x0, rtol=1e-13, err_msg=adjoint)
+
+
 def test_interval_accelerometer_noise_has_the_per_step_statistics():
     """Per-step white noise (throttle_k sigma dt n_k added to the measured Δv of step k,
     carried to the interval's end by straight-line motion), sampled by brute force, has the

@@ -50,6 +50,9 @@ class ImpactorSimulation(eqx.Module):
             ``navigation.measurement``): Gaussian LOS noise or rendered frames.
         camera, target: the scenario's camera/detector and target models (the image front end
             holds its own; these are kept for the report's frame figure).
+        reverse_mode: the closed loop's fenced computations (``computed_once``) carry their
+            own reverse-mode rules, which forward mode refuses (static; set by
+            ``ImpactorSystem.reverse_mode``). The values are the same either way.
     """
 
     r0_m: Vector3
@@ -68,6 +71,7 @@ class ImpactorSimulation(eqx.Module):
     steps_per_image: int = eqx.field(static=True)
     coast_steps: int = eqx.field(static=True, default=4)
     camera_misaligned: bool = eqx.field(static=True, default=False)
+    reverse_mode: bool = eqx.field(static=True, default=False)
     measurement: AbstractMeasurement = eqx.field(
         default_factory=lambda: GaussianLOSMeasurement(jnp.asarray(10e-6))
     )

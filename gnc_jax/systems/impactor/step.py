@@ -20,6 +20,11 @@ from .navigation import accel_noise, camera_attitudes, image_update
 from .state import Estimate, ImpactorSimulation, StepRecord
 
 
+def _adjoint(sim: ImpactorSimulation, kind: str):
+    """``computed_once``'s ``adjoint``: ``kind`` when ``sim`` is set up for reverse mode."""
+    return kind if sim.reverse_mode else None
+
+
 def _inline(fn, live, *args):
     """``fn(*args)``, left to XLA's fusion (the unfenced counterpart of computed_once)."""
     return fn(*args)
@@ -33,9 +38,14 @@ def control_step(sim: ImpactorSimulation, law, accel_bias, record, state: LoopSt
     dt = ctx.dt_s
     t, c_k = inputs  # c_k: s, weight of this step's Δv in the interval's end position
     estimate, engine, tally = state.estimate, state.actuator, state.tally
-    # Once per step, not once per consumer loop (see computed_once).
+    # Once per step, not once per consumer loop (see computed_once). In reverse mode the
+    # backward pass recomputes the law inside its own fence (its residuals are ~100 arrays).
     command, law_state = computed_once(
-        lambda s, n: law.step(s, n, t, ctx), t, state.law, estimate.nav
+        lambda s, n: law.step(s, n, t, ctx),
+        t,
+        state.law,
+        estimate.nav,
+        adjoint=_adjoint(sim, "recompute"),
     )
     throttle = command.throttle
     ignition = (throttle > 0.0) & (engine.throttle_prev <= 0.0)
@@ -152,12 +162,15 @@ def begin_interval(
     # feed every entry of the filter update (measured 4x the image step's time). The update
     # itself is fenced for the same reason (its gain feeds the 21 covariance entries); the
     # front end's key is derived inside it, where XLA drops it when the front end draws
-    # nothing (the Gaussian one).
+    # nothing (the Gaussian one). In reverse mode both keep their residuals from the forward
+    # pass: recomputing them would draw their random numbers again (measured 10 % slower).
     def draws_and_attitudes(r_hat):
         w = image_draws(key, i)
         return w, camera_attitudes(sim, r_hat, bias, w, draws.misalignment)
 
-    w, attitudes = computed_once(draws_and_attitudes, t, estimate.r_hat)
+    w, attitudes = computed_once(
+        draws_and_attitudes, t, estimate.r_hat, adjoint=_adjoint(sim, "save")
+    )
     gain, meas = computed_once(
         lambda *a: image_update(sim, *a, w[:2], fold_in(image_key(key, i), 1)),
         t,
@@ -166,6 +179,7 @@ def begin_interval(
         estimate.p,
         state.truth.r,
         attitudes,
+        adjoint=_adjoint(sim, "save"),
     )
     p = apply_gain(estimate.p, gain.terms)
     # The covariance in the packed form the filter carries: a law's plan reads its entries
