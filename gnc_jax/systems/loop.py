@@ -9,6 +9,7 @@ vehicle believes, what the law remembers, what the actuators hold and what the o
 each a typed part of its own (gymnax's ``EnvState``).
 """
 
+import functools
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
@@ -80,7 +81,8 @@ def flatten_trace(trace):
 
 
 def scan_in_blocks(step, carry, n: int, block: int, block_inputs):
-    """``lax.scan`` of ``step`` over ``n`` events (images), in blocks of ``block`` events:
+    """``lax.scan`` of ``step`` over ``n`` events (images), in blocks of ``block`` events, each
+    block checkpointed for reverse mode (``step`` may be too):
     ``block_inputs(b, length)`` gives the scan inputs of block ``b`` (``length`` events, the
     last block may be shorter), e.g. the normals of all its events drawn at once. Returns the
     carry and the trace (event-major, ``None`` when ``step`` records nothing).
@@ -90,16 +92,23 @@ def scan_in_blocks(step, carry, n: int, block: int, block_inputs):
     impactor's eight normals per 15 s image, blocks of 64 images measured 1-2 % faster only,
     so it draws per image."""
 
-    def run(carry, b, length=block):
-        return jax.lax.scan(step, carry, block_inputs(b, length), unroll=loop_shape().unroll)
+    # Each block is checkpointed, and its events by the caller's step: reverse mode keeps one
+    # carry per block, and recomputing a block one carry per event, instead of every event's
+    # residuals. Without differentiation the checkpoints are inlined: the evaluation is the same.
+    def blocks_of(length):
+        @functools.partial(jax.checkpoint, prevent_cse=False)
+        def run(carry, b):
+            return jax.lax.scan(step, carry, block_inputs(b, length), unroll=loop_shape().unroll)
+
+        return run
 
     n_full, rest = divmod(n, block)
     traces = []
     if n_full:
-        carry, rec = jax.lax.scan(run, carry, jnp.arange(n_full))
+        carry, rec = jax.lax.scan(blocks_of(block), carry, jnp.arange(n_full))
         traces.append(flatten_trace(rec))
     if rest:
-        carry, rec = run(carry, jnp.asarray(n_full), rest)
+        carry, rec = blocks_of(rest)(carry, jnp.asarray(n_full))
         traces.append(rec)
     if traces[0] is None:
         return carry, None

@@ -98,7 +98,10 @@ def run(
 ) -> tuple[LoopState, PNRecord | None]:
     """Guidance up to the cutoff: the images in blocks of ``DRAW_BLOCK`` (their normals drawn
     at once), each with its guidance steps; the trace at the guidance rate."""
-    image_step = functools.partial(_image_step, sim, law, key, draws.pointing, record)
+    # checkpointed: reverse mode keeps one loop state per image (see scan_in_blocks)
+    image_step = jax.checkpoint(
+        functools.partial(_image_step, sim, law, key, draws.pointing, record), prevent_cse=False
+    )
 
     def block_inputs(b, length):  # the image indices and their normals, one array per row
         w = block_draws(key, b, sim.planar)

@@ -152,3 +152,28 @@ def test_intercept_hit_probability_is_the_miss_against_the_target_radius():
     o, s = study.outcomes, study.summary()
     np.testing.assert_allclose(o["silhouette_ratio"], o["miss_m"] / radius, rtol=1e-6)
     assert s["hits"] == int(np.sum(o["miss_m"] < radius)) == 1 and s["hit_probability"] == 1.0
+
+
+def test_reverse_mode_through_the_checkpointed_loop_matches_forward_mode():
+    """The relaxed intercept objective's gradient in the APN law's gains: reverse mode (through
+    the checkpointed blocks of images and, inside them, the checkpointed image steps) equals
+    forward mode, run for run the same relaxed flights."""
+    import jax
+
+    from gnc_jax import tuning
+
+    sc = gj.load_scenario("bennu-apn", overrides=gj.get_system("intercept").test_overrides)
+    names = ["guidance.apn.n0", "guidance.apn.k"]
+    problem = tuning.TuningProblem(
+        sc, tuning.resolve_gains(sc, names), tuning.parse_objective(None, sc), 0
+    )
+    theta = jnp.asarray(problem.param.theta([sc[n] for n in names]))
+    idx, valid = problem.padded(np.arange(2))
+
+    def f(args, th):
+        return problem.smooth(args, th, problem.law_temperature, idx, valid)
+
+    reverse = np.asarray(jax.jit(jax.grad(f, 1))(problem.args_for("reverse"), theta))
+    forward = np.asarray(jax.jit(jax.jacfwd(f, 1))(problem.args, theta))
+    assert np.all(np.isfinite(forward)) and np.all(forward != 0.0)
+    np.testing.assert_allclose(reverse, forward, rtol=1e-8)
