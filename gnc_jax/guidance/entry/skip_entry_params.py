@@ -310,6 +310,17 @@ class SkipEntryParameters(AbstractEntryGuidance):
         "or the speed, flies the cosines of both banks weighted by the times before and after "
         "it, so the range error is continuous in sigma_0 to first order)",
     )
+    predictor_horizon: str = param(
+        "switch",
+        choices=("switch", "chute_crossrange", "chute"),
+        doc="where a prediction that reaches the switch point ends: there, adding the second "
+        "entry's range by the first-order expansion of seed 003 eq. 10 about the reference's "
+        "switch state, and judging the crossrange there ('switch'); or it flies on with the "
+        "reference's bank profile down to the chute, for the crossrange only "
+        "('chute_crossrange': the first entry's reversals then see the drift the rotating "
+        "Earth adds under the second entry, tens of km at 10,000 km) or for the crossrange "
+        "and the range ('chute'); flying on takes about 1.8 times the steps",
+    )
     apogee_switch: str = param(
         "speed",
         choices=("apogee", "speed"),
