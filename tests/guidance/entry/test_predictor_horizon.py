@@ -47,7 +47,7 @@ def test_flying_on_to_the_chute_keeps_the_switch_points_range_error(cycles):
     crossrange differs from the switch point's by the drift under the second entry (tens of
     km at the paper's 2,000 km second entry), at about twice the steps."""
     law, ctx, inputs = cycles
-    assert law.predictor_horizon == "switch"
+    law = dataclasses.replace(law, predictor_horizon="switch")
     m_s, x_s, k_s, n_s = predictions(law, ctx, inputs)
     on = dataclasses.replace(law, predictor_horizon="chute_crossrange")
     m_c, x_c, k_c, n_c = predictions(on, ctx, inputs)
@@ -68,6 +68,7 @@ def test_a_prediction_without_a_switch_point_is_the_same_whatever_the_horizon(cy
     skip (kind 1), the later ones pass the switch point. The first are the same to rounding
     under every horizon, range error and crossrange."""
     law, ctx, (y, t, up, sigma, model) = cycles
+    law = dataclasses.replace(law, predictor_horizon="switch")
     steep = (y, t, up, sigma + np.radians(9.0), model)
     m_s, x_s, k_s, _ = predictions(law, ctx, steep)
     assert 0 < np.sum(k_s == 1) < len(k_s)
