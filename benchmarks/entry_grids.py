@@ -1,7 +1,7 @@
 """The skip entry's acceptance grids: four vehicles, entry angle x downrange, 200 runs per cell.
 
     python benchmarks/entry_grids.py --out DIR [--procs 15] [--runs 200] [--only v1,ld022]
-        [--budget 540] [--keep-designs]
+        [--budget 540] [--keep-designs] [--reach-3d] [--from-json CELLS]
 
 Vehicles (``lunar-skip-entry`` with ``--set`` overrides): ``v1`` the packaged capsule (L/D
 0.30, β 315 kg/m²), ``v2`` L/D 0.25 / β 450, ``ld040`` L/D 0.40 / β 250, ``ld022`` L/D 0.22 /
@@ -13,6 +13,13 @@ of runs whose own dispersed footprint holds the target with margin in brackets; 
 when that share is ≥ 99.5 %; **bold**: a counted cell that meets ≥ 99.5 % ``ok`` and 3σ ≤ 5 km)
 are printed at the end. Rows that cannot start within ``--budget`` seconds are skipped, saying
 so. ``--keep-designs`` copies the reference designs into ``DIR/designs`` (the design cache).
+
+The pre-check's footprints are in downrange only. ``--reach-3d`` (also with ``--from-json``)
+checks each counted cell that misses the bar in three dimensions: it flies the cell's study
+again and, for each run that is not ``ok``, the run's own dispersed vehicle at every constant
+bank magnitude reversed once (:func:`gnc_jax.systems.capsule.envelope.target_reach`, 10-20 s
+a run); a run none of whose flights comes to the target in crossrange cannot reach it. A cell
+whose runs that cannot reach exceed 0.5 % no longer counts (its table entry says how many).
 """
 
 import argparse
@@ -79,6 +86,10 @@ def table(vehicle: str, cells: list[dict]) -> str:
             reach = c.get("reachable_fraction_margin")
             reach_s = "" if reach is None or reach != reach else f" ({100 * reach:.1f} %)"
             counts = reach is not None and reach >= 0.995
+            cannot = c.get("cannot_reach_3d")
+            if cannot is not None and cannot == cannot:
+                counts = counts and cannot <= 0.005 * c["runs"]
+                reach_s += f" [3-D: {int(cannot)} cannot reach]"
             if c["status"] != "simulated":
                 out.append(f"{c['status']}{reach_s}" + ("" if counts else " ·"))
                 counted += counts
@@ -91,6 +102,38 @@ def table(vehicle: str, cells: list[dict]) -> str:
             out.append(f"**{text}**" if counts and good else text + ("" if counts else " ·"))
         lines.append(f"| {r} km | " + " | ".join(out) + " |")
     return f"{vehicle}: {counted} cells count, {met} meet the bar\n" + "\n".join(lines)
+
+
+def misses_the_bar(c: dict) -> bool:
+    """A simulated cell that the pre-check counts and that misses ≥ 99.5 % ``ok`` or 3σ ≤ 5 km."""
+    reach = c.get("reachable_fraction_margin")
+    if c["status"] != "simulated" or reach is None or not reach >= 0.995:
+        return False
+    sig = c.get("chute_3sigma_km")
+    return 1 - c["failed_fraction"] < 0.995 or sig is None or not sig <= 5.0
+
+
+def reach_3d(cells: dict) -> None:
+    """``cannot_reach_3d`` of each counted cell that misses the bar: its runs that are not
+    ``ok`` and that no constant bank magnitude reversed once brings to the target."""
+    import numpy as np
+
+    import gnc_jax as gj
+    from gnc_jax.systems.capsule.envelope import target_reach
+
+    for v, cs in cells.items():
+        overrides = VEHICLES[v][0]
+        for c in filter(misses_the_bar, cs):
+            fpa, rng = c["entry.fpa_deg"], c["entry.range_km"]
+            scenario = gj.load_scenario(
+                "lunar-skip-entry", [*overrides, f"entry.fpa_deg={fpa}", f"entry.range_km={rng}"]
+            )
+            study = gj.run_study(scenario, runs=int(c["runs"]), seed=0, progress=False)
+            failed = np.flatnonzero(study.status != gj.Status.ok)
+            spans = target_reach(scenario.config, failed, seed=0)
+            cannot = [int(i) for i, (lo, hi) in zip(failed, spans) if not lo <= 0.0 <= hi]
+            c["cannot_reach_3d"] = float(len(cannot))
+            print(f"{v} {fpa:g}°/{rng:g} km: {len(failed)} runs not ok, cannot reach: {cannot}")
 
 
 def report(cells: dict, out: pathlib.Path, runs: int) -> int:
@@ -117,6 +160,7 @@ def main(argv=None) -> int:
     p.add_argument("--budget", type=float, default=float("inf"), help="seconds to start rows")
     p.add_argument("--keep-designs", action="store_true")
     p.add_argument("--from-json", default=None, help="tables and heat maps of a cells.json")
+    p.add_argument("--reach-3d", action="store_true", help="three-dimensional reach of the misses")
     p.add_argument("--row", default=None, help=argparse.SUPPRESS)  # a child: vehicle:fpa:core
     a = p.parse_args(argv)
     out = pathlib.Path(a.out)
@@ -128,6 +172,10 @@ def main(argv=None) -> int:
         return 0
     if a.from_json:
         cells = json.loads(pathlib.Path(a.from_json).read_text())
+        if a.reach_3d:
+            reach_3d(cells)
+            out.mkdir(parents=True, exist_ok=True)
+            (out / "cells.json").write_text(json.dumps(cells, indent=1, default=float))
         return report(cells, out, a.runs)
     rows = [(v, f) for v in a.only.split(",") for f in VEHICLES[v][1]]
     t0, running, logs = time.perf_counter(), [], out / "logs"
@@ -154,6 +202,8 @@ def main(argv=None) -> int:
         vehicle = path.parent.name.rsplit("_", 1)[0]
         if vehicle in cells:
             cells[vehicle] += pq.read_table(path).to_pylist()
+    if a.reach_3d:
+        reach_3d(cells)
     (out / "cells.json").write_text(json.dumps(cells, indent=1, default=float))
     report(cells, out, a.runs)
     if a.keep_designs:

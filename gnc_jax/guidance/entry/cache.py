@@ -14,7 +14,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from ...schema import ScenarioError
-from .design import design_at_the_edge, design_with_fallback
+from .design import design_at_the_edge, design_with_fallback, edge_notice
 from .nominal import NominalProblem
 from .reach import require_reachable
 from .reference import ReferenceTrajectory
@@ -59,6 +59,8 @@ def reference_for(problem: NominalProblem, description: dict, **design_kwargs):
     if source is not None:
         with source.open("rb") as fh:
             data = dict(np.load(fh))
+        if "edge_notice" in data:  # designed at the edge of the footprint: say it again
+            print(str(data["edge_notice"]), file=sys.stderr, flush=True)
     else:
         entry, vehicle = description["entry"], description["vehicle"]
         print(
@@ -93,8 +95,10 @@ def reference_for(problem: NominalProblem, description: dict, **design_kwargs):
                 bar.set_postfix_str(f"{label}step {step}/{steps}, objective {objective:.4g}")
                 bar.update()
 
+            notice = None
             if nearest is None:
                 d = design_at_the_edge(problem, entry, vehicle, edge)
+                notice = edge_notice(entry, d)
             else:
                 kwargs = dict(design_kwargs, sigma_1_guess=nearest if guess is None else guess)
                 d = design_with_fallback(problem, entry, vehicle, callback=stepped, **kwargs)
@@ -103,6 +107,8 @@ def reference_for(problem: NominalProblem, description: dict, **design_kwargs):
             bar.update()
         data = {f: np.asarray(getattr(ref, f)) for f in ReferenceTrajectory.__dataclass_fields__}
         data["objective_history"] = np.asarray(d.objective_history)
+        if notice is not None:
+            data["edge_notice"] = np.asarray(notice)
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             np.savez(path, **data)

@@ -206,9 +206,7 @@ def design_at_the_edge(
     ``EDGE_PROFILE_BOUNDS_RAD``, for a target the design's own banks do not reach
     (``refusal``, the reach check's). Says so on stderr, with the banks it chose. If the edge
     design fails too, raises ``refusal`` with what the edge design reaches added."""
-    lo1, hi1 = (f"{math.degrees(x):.0f}" for x in EDGE_FIRST_ENTRY_BOUNDS_RAD)
-    lo2, hi2 = (f"{math.degrees(x):.0f}" for x in EDGE_PROFILE_BOUNDS_RAD)
-    banks = f"first-entry banks {lo1}..{hi1} deg and second-entry banks {lo2}..{hi2} deg"
+    banks = _edge_banks()
     try:
         d = design_by_profile(
             problem, entry, vehicle, (EDGE_FIRST_ENTRY_BOUNDS_RAD, EDGE_PROFILE_BOUNDS_RAD)
@@ -216,15 +214,26 @@ def design_at_the_edge(
         require_design(problem, d, entry, vehicle)
     except ScenarioError as e:
         raise ScenarioError(f"{refusal}; with {banks}: {str(e).partition('; ')[2]}") from None
-    print(
+    print(edge_notice(entry, d), file=sys.stderr, flush=True)
+    return d
+
+
+def _edge_banks() -> str:
+    lo1, hi1 = (f"{math.degrees(x):.0f}" for x in EDGE_FIRST_ENTRY_BOUNDS_RAD)
+    lo2, hi2 = (f"{math.degrees(x):.0f}" for x in EDGE_PROFILE_BOUNDS_RAD)
+    return f"first-entry banks {lo1}..{hi1} deg and second-entry banks {lo2}..{hi2} deg"
+
+
+def edge_notice(entry: dict, d: "DesignResult") -> str:
+    """What :func:`design_at_the_edge` says of the design ``d`` it made (kept with the cached
+    reference, which says it again when it is read back)."""
+    banks = _edge_banks()
+    return (
         f"gnc_jax: entry.range_km {entry['range_km']:g} km is beyond the design's first-entry "
         f"banks; designed at the edge of the footprint with {banks}: first-entry bank "
         f"{math.degrees(d.sigma_1):.1f} deg, second-entry bank {math.degrees(d.sigma_a):.1f} "
-        "deg. Little bank is left there for the dispersions.",
-        file=sys.stderr,
-        flush=True,
+        "deg. Little bank is left there for the dispersions."
     )
-    return d
 
 
 def require_design(problem: NominalProblem, d: "DesignResult", entry: dict, vehicle: dict):

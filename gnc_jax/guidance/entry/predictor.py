@@ -91,6 +91,9 @@ class _PredictorState(NamedTuple):
     second: Array
     kind: Array  # -1 running, else that of Prediction (3: inactive, no step taken)
     k: Array
+    # the step in which the switch point fell (before, now, time of now, length) and whether
+    # it has, for a prediction that flies on to the chute (``predictor_horizon``); else None
+    switch_step: tuple | None = None
 
 
 def profile(law, sigma_0, v_0, speed):
@@ -198,7 +201,14 @@ def predictor_start(law, o: _Origin, sigma_0, active, model) -> _PredictorState:
         second=f,
         kind=jnp.where(active, -1, 3).astype(jnp.int32),
         k=jnp.asarray(0, jnp.int32),
+        switch_step=None if flies_to_switch(law) else (o.point, o.point, o.t, jnp.zeros(()), f),
     )
+
+
+def flies_to_switch(law) -> bool:
+    """Whether a prediction ends at the switch point (``predictor_horizon = "switch"``) or,
+    flying on to the chute, keeps the step in which it passed it (static)."""
+    return law.predictor_horizon == "switch" or is_direct(law)
 
 
 def integrating(law, c: _PredictorState):
@@ -247,6 +257,17 @@ def predictor_step(law, c: _PredictorState, sigma_0, v_0, model) -> _PredictorSt
     on_speed = pulled & (speed1 <= law.reference.switch_velocity_mps)
     crest = ~kepler & skip_switch(law, pulled, hdot1, ng1, speed1)
     second = c.second | jnp.where(by_speed, on_speed, crest)
+    switch_step = c.switch_step
+    if not flies_to_switch(law):  # fly on from the switch point with the reference's bank
+        before, now, t_sw, dt_sw, passed = switch_step
+        now1 = _Point(y1, alt1, hdot1, ng1, speed1)
+        keep = lambda a, b: jax.tree_util.tree_map(  # noqa: E731
+            lambda x, y: jnp.where(switch, y, x), a, b
+        )
+        switch_step = keep((before, now, t_sw, dt_sw, passed), (c.now, now1, c.t + dt, dt, switch))
+        second = second | switch
+        kepler = kepler & ~switch
+        switch = jnp.zeros_like(switch)
     if is_direct(law):  # down to the chute on the constant bank
         kepler = switch = second = jnp.zeros_like(kepler)
     chute = alt1 < law.chute_altitude_m
@@ -291,6 +312,7 @@ def predictor_step(law, c: _PredictorState, sigma_0, v_0, model) -> _PredictorSt
         second=second,
         kind=kind,
         k=c.k + 1,
+        switch_step=switch_step,
     )
 
 
@@ -383,6 +405,23 @@ def end_point(law, c: _PredictorState):
 
 def finished_prediction(law, c: _PredictorState, y, t, model, target_fixed) -> Prediction:
     """Range error and crossrange of a finished prediction started at ``(y, t)``."""
+    p = _prediction_at_end(law, c, y, t, model, target_fixed)
+    if flies_to_switch(law):
+        return p
+    # flown on from a switch point: its range error and kind ("chute_crossrange"), and the
+    # chute's crossrange unless the flight on ended otherwise
+    before, now, t_sw, dt_sw, passed = c.switch_step
+    at = c._replace(before=before, now=now, t=t_sw, dt=dt_sw, kind=jnp.zeros_like(c.kind))
+    sw = _prediction_at_end(law, at, y, t, model, target_fixed)
+    chi = jnp.where(passed & (p.kind != 1), sw.crossrange_m, p.crossrange_m)
+    if law.predictor_horizon == "chute":
+        return Prediction(p.miss_m, chi, p.kind, p.steps)
+    return Prediction(
+        jnp.where(passed, sw.miss_m, p.miss_m), chi, jnp.where(passed, 0, p.kind), p.steps
+    )
+
+
+def _prediction_at_end(law, c: _PredictorState, y, t, model, target_fixed) -> Prediction:
     earth = model.earth
     y_end, t_end = end_point(law, c)
     kind = jnp.where(c.kind < 0, 2, c.kind)  # out of steps: treat as a skip-out

@@ -138,3 +138,34 @@ def test_a_target_beyond_the_designs_banks_is_designed_at_the_edge_of_the_footpr
     assert "\n" not in text and "second-entry banks 15..165 deg: allowed:" in text
     hi = float(re.search(r"\(\d+ \.\. (\d+) km;", text.rpartition("deg: ")[2]).group(1))
     assert 10000.0 < hi < 12000.0
+
+
+def test_a_design_at_the_edge_says_so_again_when_its_cached_reference_is_read(
+    tmp_path, monkeypatch, capsys
+):
+    """The reference of a design made at the footprint's edge, read back from the cache by a
+    later process, repeats the edge design's notice; a standard design's says nothing."""
+    from gnc_jax.guidance.entry import cache
+    from gnc_jax.schema import ScenarioError
+
+    _, law = gj.build(gj.load_scenario("lunar-skip-entry"))
+    monkeypatch.setenv("GNC_JAX_CACHE", str(tmp_path))
+    monkeypatch.setattr(cache, "tabulate_reference", lambda problem, d: law.reference)
+    edge = design.DesignResult(0.04, 0.26, 0.26, 7000.0, [1.0])
+
+    def refused(*_, **__):
+        raise ScenarioError("entry.range_km: 12000 km; beyond the design's banks")
+
+    monkeypatch.setattr(cache, "require_reachable", refused)
+    monkeypatch.setattr(cache, "design_at_the_edge", lambda problem, entry, vehicle, e: edge)
+    for range_km, notice in ((12000.0, True), (8000.0, False)):
+        description = {"entry": {"range_km": range_km}, "vehicle": {}}
+        if not notice:  # a standard design
+            monkeypatch.setattr(cache, "require_reachable", lambda *_, **__: (0, 0, 1.3))
+            monkeypatch.setattr(cache, "design_with_fallback", lambda *_, **__: edge)
+        cache.reference_for(None, description)
+        capsys.readouterr()
+        cache._MEMORY.clear()  # a later process: read from the cache
+        cache.reference_for(None, description)
+        said = "designed at the edge of the footprint" in capsys.readouterr().err
+        assert said == notice
