@@ -40,11 +40,14 @@ def example(name):
 # in both layouts.
 @pytest.mark.parametrize("name", ["impactor", "intercept", "capsule"])
 def test_accelerator_layout_on_cpu_matches_within_batch_tolerance(name):
+    """Three runs in chunks of two on one device: in the CPU's layout that is the program
+    tests/test_family.py compiles for its chunked study, read from the session's XLA cache."""
     assert name in gj.systems()
     scenario = example(name)
-    cpu = gj.run_study(scenario, runs=3, seed=3, progress=False, n_devices=1)
+    study = dict(runs=3, seed=3, chunk_size=2, n_devices=1, progress=False)
+    cpu = gj.run_study(scenario, **study)
     with using_loop_shape(closed_loop_layout(gj.get_system(name))):  # what a GPU compiles
-        acc = gj.run_study(scenario, runs=3, seed=3, progress=False, n_devices=1)
+        acc = gj.run_study(scenario, **study)
     assert acc.compile_s > 0.0, "the forced layout must compile its own program"
     assert cpu.summary()["failed"] == 0, cpu.summary()["failed_by_status"]
     rtol, atol = gj.get_system(name).batch_tolerance

@@ -70,14 +70,13 @@ def capsule_scenario():
 def test_flight_stopped_when_down_equals_the_full_length_scan(capsule_scenario):
     """Without a trace the guidance cycles stop once the flight is down (a while_loop); with
     one they run the whole max_time_s (a scan). A finished flight is frozen, so both give the
-    same outcome, the scan being an independent loop structure."""
-    from gnc_jax.systems.capsule.simulation import simulate
-
-    sim, law = gj.build(capsule_scenario)
+    same outcome, the scan being an independent loop structure. (Through ``simulate_one``: the
+    per-run programs tests/test_family.py and tests/guidance/entry/test_skip_entry.py compile,
+    read from the session's XLA cache.)"""
+    sim, _ = gj.build(capsule_scenario)
     for i in range(2):
-        key = gj.run_key(5, i)
-        short, _ = jax.jit(lambda k: simulate(sim, law, k, record=False))(key)
-        full, trace = jax.jit(lambda k: simulate(sim, law, k, record=True))(key)
+        short, _ = gj.simulate_one(capsule_scenario, index=i, seed=5, record=False)
+        full, trace = gj.simulate_one(capsule_scenario, index=i, seed=5, record=True)
         assert trace.t_s.shape == (sim.n_control,)
         assert float(short.t_chute_s) < 0.7 * sim.n_control * sim.control_dt
         for name in short._fields:
