@@ -32,13 +32,21 @@ def cycles():
     return law, ctx, inputs
 
 
-def predictions(law, ctx, inputs):
+@jax.jit
+def _predict(law, target_fixed, y, t, up, sigma, model):
     def one(y, t, up, s0, m):
-        p = predict(law, y, t, up, s0, m, ctx.target_fixed)
+        p = predict(law, y, t, up, s0, m, target_fixed)
         return p.miss_m, p.crossrange_m, p.kind, p.steps
 
+    return jax.vmap(one)(y, t, up, sigma, model)
+
+
+def predictions(law, ctx, inputs):
+    """The predictions of ``law`` at the cycles ``inputs``: one program per law setting and
+    batch shape, shared by the tests (the law is an argument of the program)."""
     y, t, up, sigma, model = inputs
-    return [np.asarray(x) for x in jax.jit(jax.vmap(one))(y, t, up, jnp.asarray(sigma), model)]
+    out = _predict(law, ctx.target_fixed, y, t, up, jnp.asarray(sigma), model)
+    return [np.asarray(x) for x in out]
 
 
 def test_flying_on_to_the_chute_keeps_the_switch_points_range_error(cycles):
@@ -93,8 +101,7 @@ def test_the_chute_crossrange_converges_with_the_predictor_step(cycles):
         predictor_coast_dt_s=1.0,
         predictor_max_steps=4000,
     )
-    late = jax.tree_util.tree_map(lambda x: x[-6:], inputs)
-    _, x, _, _ = predictions(on, ctx, late)
-    _, x_fine, k_fine, _ = predictions(fine, ctx, late)
-    np.testing.assert_array_equal(k_fine, 1)
-    assert np.max(np.abs(x - x_fine)) < 1.0e3
+    _, x, _, _ = predictions(on, ctx, inputs)
+    _, x_fine, k_fine, _ = predictions(fine, ctx, inputs)
+    np.testing.assert_array_equal(k_fine[-6:], 1)
+    assert np.max(np.abs(x[-6:] - x_fine[-6:])) < 1.0e3
