@@ -212,20 +212,11 @@ def test_reverse_mode_through_the_checkpointed_loop_matches_forward_mode_and_dif
     mode, and both match central differences."""
     import jax
     import jax.numpy as jnp
+    from relaxed_gradient import relaxed_objective
 
-    from gnc_jax import tuning
-
-    sc = gj.load_scenario("deep-impact-los", overrides=gj.get_system("impactor").test_overrides)
-    names = ["guidance.los.k1", "guidance.los.k2"]
-    problem = tuning.TuningProblem(
-        sc, tuning.resolve_gains(sc, names), tuning.parse_objective(None, sc), 0
+    f, problem, theta = relaxed_objective(
+        "deep-impact-los", "impactor", ["guidance.los.k1", "guidance.los.k2"]
     )
-    theta = jnp.asarray(problem.param.theta([sc[n] for n in names]))
-    idx, valid = problem.padded(np.arange(2))
-
-    def f(args, th):
-        return problem.smooth(args, th, problem.law_temperature, idx, valid)
-
     reverse = np.asarray(jax.jit(jax.grad(f, 1))(problem.args_for("reverse"), theta))
     # One forward-mode program, (point, direction) pairs: the derivative along each gain at
     # theta, and the values at theta +- h along each gain (their tangents unused).

@@ -159,20 +159,11 @@ def test_reverse_mode_through_the_checkpointed_loop_matches_forward_mode():
     the checkpointed blocks of images and, inside them, the checkpointed image steps) equals
     forward mode, run for run the same relaxed flights."""
     import jax
+    from relaxed_gradient import relaxed_objective
 
-    from gnc_jax import tuning
-
-    sc = gj.load_scenario("bennu-apn", overrides=gj.get_system("intercept").test_overrides)
-    names = ["guidance.apn.n0", "guidance.apn.k"]
-    problem = tuning.TuningProblem(
-        sc, tuning.resolve_gains(sc, names), tuning.parse_objective(None, sc), 0
+    f, problem, theta = relaxed_objective(
+        "bennu-apn", "intercept", ["guidance.apn.n0", "guidance.apn.k"]
     )
-    theta = jnp.asarray(problem.param.theta([sc[n] for n in names]))
-    idx, valid = problem.padded(np.arange(2))
-
-    def f(args, th):
-        return problem.smooth(args, th, problem.law_temperature, idx, valid)
-
     reverse = np.asarray(jax.jit(jax.grad(f, 1))(problem.args_for("reverse"), theta))
     forward = np.asarray(jax.jit(jax.jacfwd(f, 1))(problem.args, theta))
     assert np.all(np.isfinite(forward)) and np.all(forward != 0.0)
