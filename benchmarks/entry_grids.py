@@ -166,7 +166,7 @@ def main(argv=None) -> int:
     out = pathlib.Path(a.out)
     if a.row:
         vehicle, fpa, core = a.row.split(":")
-        if hasattr(os, "sched_setaffinity") and int(core) < (os.cpu_count() or 1):
+        if hasattr(os, "sched_setaffinity") and 0 <= int(core) < (os.cpu_count() or 1):
             os.sched_setaffinity(0, {int(core)})
         row_job(vehicle, float(fpa), a.runs, out / f"{vehicle}_{fpa}")
         return 0
@@ -188,10 +188,11 @@ def main(argv=None) -> int:
             if time.perf_counter() - t0 > a.budget:
                 print(f"{v} {f}°: skipped, past the budget", flush=True)
                 continue
+            pin = core if a.procs <= (os.cpu_count() or 1) else -1  # more rows than cores: unpinned
             log = open(logs / f"{v}_{f}.log", "w")
             cmd = [sys.executable, __file__, "--out", str(out), "--runs", str(a.runs)]
             proc = subprocess.Popen(
-                [*cmd, "--row", f"{v}:{f}:{core}"], env=one_process_env(), stdout=log, stderr=log
+                [*cmd, "--row", f"{v}:{f}:{pin}"], env=one_process_env(), stdout=log, stderr=log
             )
             running.append(((v, f), core, proc))
         time.sleep(1.0)

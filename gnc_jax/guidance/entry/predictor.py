@@ -216,10 +216,25 @@ def integrating(law, c: _PredictorState):
     return (c.kind < 0) & (c.k < law.predictor_max_steps)
 
 
-def predicted_bank(law, second, sigma_0, v_0, speed):
-    """Bank magnitude the prediction flies: the first-entry profile, or the reference
-    after a skip without a Kepler phase (``second``)."""
-    return jnp.where(second, law.reference.bank_at(speed), profile(law, sigma_0, v_0, speed))
+def second_entry_cos(law, speed, model):
+    """Cosine of the bank a prediction flies in the second entry: the reference's, or with
+    ``second_entry_bank = "tracked"`` the tracking's command without feedback (eq. 6:
+    divided by the model's L/D over the reference's, at least ``track_bank_min``)."""
+    cos_ref = jnp.cos(law.reference.bank_at(speed))
+    if law.second_entry_bank == "reference":
+        return cos_ref
+    lim = jnp.cos(law.track_bank_min_rad)
+    return jnp.clip(cos_ref * model.drag_ratio / model.lift_ratio, -lim, lim)
+
+
+def predicted_cos_bank(law, second, sigma_0, v_0, speed, model):
+    """Cosine of the bank the prediction flies: the first-entry profile's, or the second
+    entry's after a skip without a Kepler phase (``second``)."""
+    if law.second_entry_bank == "reference":  # (the cosine of one bank)
+        bank = jnp.where(second, law.reference.bank_at(speed), profile(law, sigma_0, v_0, speed))
+        return jnp.cos(bank)
+    first = jnp.cos(profile(law, sigma_0, v_0, speed))
+    return jnp.where(second, second_entry_cos(law, speed, model), first)
 
 
 def predictor_step(law, c: _PredictorState, sigma_0, v_0, model) -> _PredictorState:
@@ -239,7 +254,7 @@ def predictor_step(law, c: _PredictorState, sigma_0, v_0, model) -> _PredictorSt
     def field(t, y, _):
         if law.predictor_bank == "stage":  # the profile at this stage's speed
             speed = altitude_speed_hdot(y, model.earth)[1]
-            cos_b = jnp.cos(predicted_bank(law, c.second, sigma_0, v_0, speed))
+            cos_b = predicted_cos_bank(law, c.second, sigma_0, v_0, speed, model)
             return model.vertical_plane_xyz(y, cos_b)[0]
         return model.vertical_plane_xyz(y, c.cos_bank)[0]
 
@@ -281,7 +296,7 @@ def predictor_step(law, c: _PredictorState, sigma_0, v_0, model) -> _PredictorSt
         if law.predictor_coast_dt_s != dt_next:
             dt_next = jnp.where(ng1 < law.predictor_coast_load_g, law.predictor_coast_dt_s, dt_next)
         speed_bank = speed1 + (0.5 * dt_next / dt) * (speed1 - c.now.speed_mps)
-    cos_b1 = jnp.cos(predicted_bank(law, second, sigma_0, v_0, speed_bank))
+    cos_b1 = predicted_cos_bank(law, second, sigma_0, v_0, speed_bank, model)
     if law.predictor_apogee == "blend" and not is_direct(law):
         cos_b1 = apogee_blend(
             law,
@@ -297,6 +312,7 @@ def predictor_step(law, c: _PredictorState, sigma_0, v_0, model) -> _PredictorSt
             pulled,
             kepler,
             second,
+            model,
         )
     dy1, _ = model.vertical_plane_xyz(y1, cos_b1, density=density1)
     return _PredictorState(
@@ -330,6 +346,7 @@ def apogee_blend(
     pulled,
     kepler,
     second,
+    model,
 ):
     """Cosine of the bank of the step from ``1`` (``predictor_apogee = "blend"``): a step
     that will reach the switch of a skip without a Kepler phase (its apogee, or the
@@ -360,7 +377,7 @@ def apogee_blend(
     no_kepler = ~kepler & (ng1 >= law.kepler_load_g)
     blend = ~second & (by_speed | no_kepler) & coming & (tau < dt) & at_switch
     f = jnp.clip(tau / dt, 0.0, 1.0)
-    cos_ref = jnp.cos(law.reference.bank_at(speed_bank))
+    cos_ref = second_entry_cos(law, speed_bank, model)
     return jnp.where(blend, f * cos_b1 + (1.0 - f) * cos_ref, cos_b1)
 
 

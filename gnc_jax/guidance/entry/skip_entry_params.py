@@ -311,7 +311,7 @@ class SkipEntryParameters(AbstractEntryGuidance):
         "it, so the range error is continuous in sigma_0 to first order)",
     )
     predictor_horizon: str = param(
-        "switch",
+        "chute_crossrange",
         choices=("switch", "chute_crossrange", "chute"),
         doc="where a prediction that reaches the switch point ends: there, adding the second "
         "entry's range by the first-order expansion of seed 003 eq. 10 about the reference's "
@@ -321,6 +321,16 @@ class SkipEntryParameters(AbstractEntryGuidance):
         "Earth adds under the second entry, about 20 km on the paper's nominal) or for the "
         "crossrange and the range ('chute'). Flying on takes 1.75 times the predictor's "
         "steps (paper scenario, 1000 runs: 23 % more CPU time); see the design decisions",
+    )
+    second_entry_bank: str = param(
+        "tracked",
+        choices=("reference", "tracked"),
+        doc="bank a prediction flies in a second entry it flies (a skip without a Kepler "
+        "phase, or flown on to the chute: predictor_horizon): the reference's "
+        "('reference') or the reference's vertical lift as the tracking commands it "
+        "('tracked': cos sigma divided by the measured L/D over the reference's, eq. 6 "
+        "without its feedback, at least track_bank_min_deg), so that a run whose L/D is "
+        "off its model predicts the second entry its tracking will fly",
     )
     apogee_switch: str = param(
         "speed",

@@ -11,7 +11,8 @@ import pytest
 import gnc_jax as gj
 from gnc_jax.dynamics.entry import EntryState
 from gnc_jax.guidance.entry.base import EntryModel
-from gnc_jax.guidance.entry.predictor import predict
+from gnc_jax.guidance.entry.predictor import predict, second_entry_cos
+from gnc_jax.guidance.entry.tracking import track
 from gnc_jax.systems.capsule.simulation import guidance_context
 
 
@@ -105,3 +106,48 @@ def test_the_chute_crossrange_converges_with_the_predictor_step(cycles):
     _, x_fine, k_fine, _ = predictions(fine, ctx, inputs)
     np.testing.assert_array_equal(k_fine[-6:], 1)
     assert np.max(np.abs(x[-6:] - x_fine[-6:])) < 1.0e3
+
+
+def test_a_tracked_second_entry_flies_the_tracking_command_without_feedback(cycles):
+    """``second_entry_bank = "tracked"``: the cosine a prediction flies in a second entry is
+    the one the law's tracking (eq. 6) commands on the reference with no deviation, for a
+    model whose L/D is off the reference's either way; with the model's L/D on it, the
+    reference's own cosine."""
+    law, ctx, _ = cycles
+    law = dataclasses.replace(law, second_entry_bank="tracked")
+    ref = law.reference
+    speeds = np.linspace(float(ref.velocity_mps[-1]), float(ref.velocity_mps[0]), 7)
+    c = ctx.model
+    for drag_ratio, lift_ratio in ((0.70, 0.78), (1.10, 0.95), (0.9, 0.9)):
+        model = EntryModel(c.vehicle, c.earth, c.atmosphere, drag_ratio, lift_ratio)
+        for v in speeds:
+            _, s, hdot, ngx, sdot = ref.lookup(v)
+            bank = track(law, v, ngx, hdot, s, sdot, lift_ratio / drag_ratio, 0.0)
+            np.testing.assert_allclose(
+                second_entry_cos(law, v, model), np.cos(bank), rtol=0, atol=1e-12
+            )
+            if drag_ratio == lift_ratio:
+                np.testing.assert_allclose(
+                    second_entry_cos(law, v, model), np.cos(ref.bank_at(v)), rtol=0, atol=1e-12
+                )
+
+
+def test_a_tracked_second_entry_flies_less_vertical_lift_for_a_higher_ld(cycles):
+    """Predictions flown on to the chute (``predictor_horizon = "chute"``): with the cycles'
+    measured ratios (lift above drag: an L/D over the model's), the tracked second entry
+    lands shorter than the reference bank's; with the lift ratio set to the drag ratio, the
+    two are the same to rounding."""
+    law, ctx, (y, t, up, sigma, model) = cycles
+    assert np.all(np.asarray(model.lift_ratio) > np.asarray(model.drag_ratio))
+    on = dataclasses.replace(law, predictor_horizon="chute")
+    tracked = dataclasses.replace(on, second_entry_bank="tracked")
+    m_ref, _, k_ref, _ = predictions(on, ctx, (y, t, up, sigma, model))
+    m_tr, _, k_tr, _ = predictions(tracked, ctx, (y, t, up, sigma, model))
+    np.testing.assert_array_equal(k_ref, 1)
+    np.testing.assert_array_equal(k_tr, 1)
+    assert np.all(m_tr < m_ref - 1.0e3)
+    same = dataclasses.replace(model, lift_ratio=model.drag_ratio)
+    m_ref, x_ref, _, _ = predictions(on, ctx, (y, t, up, sigma, same))
+    m_tr, x_tr, _, _ = predictions(tracked, ctx, (y, t, up, sigma, same))
+    np.testing.assert_allclose(m_tr, m_ref, rtol=1e-12, atol=1e-6)
+    np.testing.assert_allclose(x_tr, x_ref, rtol=1e-12, atol=1e-6)
