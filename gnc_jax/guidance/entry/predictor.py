@@ -3,8 +3,11 @@ profile, by integrating the vertical-plane dynamics ahead.
 
 The profile is |sigma|(v) = sigma_0 + (sigma_f - sigma_0) (v_0 - v)/(v_0 - v_sw), linear in
 Earth-relative speed from the current speed v_0 to the reference switch speed v_sw. A
-prediction runs only up to the second-entry (switch) point and adds the second-entry range by
-the first-order expansion of eq. 10 around the stored reference. The on-board model it flies is
+prediction runs up to the second-entry (switch) point and adds the second-entry range by the
+first-order expansion of eq. 10 around the stored reference; after the pull-up it may fly on
+to the chute for the crossrange there (``predictor_horizon``). A second entry it flies (after
+a skip without a Kepler phase, or flown on) flies the bank the tracking will command
+(``second_entry_bank``). The on-board model it flies is
 scaled by the filtered ratios of measured to modelled drag and lift (:func:`filter_ratios`).
 Each function takes the law (:class:`~gnc_jax.guidance.entry.skip_entry.SkipEntryGuidance`) for
 its settings and reference; the corrector (:mod:`gnc_jax.guidance.entry.corrector`) drives the
@@ -91,8 +94,9 @@ class _PredictorState(NamedTuple):
     second: Array
     kind: Array  # -1 running, else that of Prediction (3: inactive, no step taken)
     k: Array
-    # the step in which the switch point fell (before, now, time of now, length) and whether
-    # it has, for a prediction that flies on to the chute (``predictor_horizon``); else None
+    # the step in which the switch point fell (before, now, time of now, length), whether it
+    # has, and whether the prediction flies on from it (started after the pull-up), for a
+    # ``predictor_horizon`` that flies on to the chute; else None
     switch_step: tuple | None = None
 
 
@@ -201,13 +205,16 @@ def predictor_start(law, o: _Origin, sigma_0, active, model) -> _PredictorState:
         second=f,
         kind=jnp.where(active, -1, 3).astype(jnp.int32),
         k=jnp.asarray(0, jnp.int32),
-        switch_step=None if flies_to_switch(law) else (o.point, o.point, o.t, jnp.zeros(()), f),
+        switch_step=None
+        if flies_to_switch(law)
+        else (o.point, o.point, o.t, jnp.zeros(()), f, jnp.asarray(o.pulled_up)),
     )
 
 
 def flies_to_switch(law) -> bool:
-    """Whether a prediction ends at the switch point (``predictor_horizon = "switch"``) or,
-    flying on to the chute, keeps the step in which it passed it (static)."""
+    """Whether every prediction ends at the switch point (``predictor_horizon = "switch"``)
+    or, one started after the pull-up flying on to the chute, keeps the step in which it
+    passed it (static)."""
     return law.predictor_horizon == "switch" or is_direct(law)
 
 
@@ -274,15 +281,21 @@ def predictor_step(law, c: _PredictorState, sigma_0, v_0, model) -> _PredictorSt
     second = c.second | jnp.where(by_speed, on_speed, crest)
     switch_step = c.switch_step
     if not flies_to_switch(law):  # fly on from the switch point with the reference's bank
-        before, now, t_sw, dt_sw, passed = switch_step
+        before, now, t_sw, dt_sw, passed, flies_on = switch_step
         now1 = _Point(y1, alt1, hdot1, ng1, speed1)
+        # the first switch point of a prediction started after the pull-up (a skip flown on
+        # may skip again); one started before it ends there
+        first = switch & ~passed & flies_on
         keep = lambda a, b: jax.tree_util.tree_map(  # noqa: E731
-            lambda x, y: jnp.where(switch, y, x), a, b
+            lambda x, y: jnp.where(first, y, x), a, b
         )
-        switch_step = keep((before, now, t_sw, dt_sw, passed), (c.now, now1, c.t + dt, dt, switch))
-        second = second | switch
-        kepler = kepler & ~switch
-        switch = jnp.zeros_like(switch)
+        switch_step = keep(
+            (before, now, t_sw, dt_sw, passed, flies_on),
+            (c.now, now1, c.t + dt, dt, first, flies_on),
+        )
+        second = second | first
+        kepler = kepler & ~first
+        switch = switch & ~flies_on
     if is_direct(law):  # down to the chute on the constant bank
         kepler = switch = second = jnp.zeros_like(kepler)
     chute = alt1 < law.chute_altitude_m
@@ -427,7 +440,7 @@ def finished_prediction(law, c: _PredictorState, y, t, model, target_fixed) -> P
         return p
     # flown on from a switch point: its range error and kind ("chute_crossrange"), and the
     # chute's crossrange unless the flight on ended otherwise
-    before, now, t_sw, dt_sw, passed = c.switch_step
+    before, now, t_sw, dt_sw, passed, _ = c.switch_step
     at = c._replace(before=before, now=now, t=t_sw, dt=dt_sw, kind=jnp.zeros_like(c.kind))
     sw = _prediction_at_end(law, at, y, t, model, target_fixed)
     chi = jnp.where(passed & (p.kind != 1), sw.crossrange_m, p.crossrange_m)

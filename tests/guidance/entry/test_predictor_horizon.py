@@ -51,25 +51,36 @@ def predictions(law, ctx, inputs):
 
 
 def test_flying_on_to_the_chute_keeps_the_switch_points_range_error(cycles):
-    """``chute_crossrange``: the range errors (to rounding: another program) and kinds of
-    ``switch``, the crossrange of the prediction flown on to the chute (``chute``), and that
-    crossrange differs from the switch point's by the drift under the second entry (tens of
-    km at the paper's 2,000 km second entry), at about twice the steps."""
+    """``chute_crossrange``, for the cycles after the pull-up: the range errors (to rounding:
+    another program) and kinds of ``switch``, the crossrange of the prediction flown on to
+    the chute (``chute``), and that crossrange differs from the switch point's by the drift
+    under the second entry (tens of km at the paper's 2,000 km second entry), at about twice
+    the steps. Before the pull-up every horizon is ``switch``, steps included."""
     law, ctx, inputs = cycles
     law = dataclasses.replace(law, predictor_horizon="switch")
     m_s, x_s, k_s, n_s = predictions(law, ctx, inputs)
     on = dataclasses.replace(law, predictor_horizon="chute_crossrange")
     m_c, x_c, k_c, n_c = predictions(on, ctx, inputs)
-    _, x_f, k_f, n_f = predictions(dataclasses.replace(law, predictor_horizon="chute"), ctx, inputs)
+    m_f, x_f, k_f, n_f = predictions(
+        dataclasses.replace(law, predictor_horizon="chute"), ctx, inputs
+    )
+    after = np.asarray(inputs[2])
+    assert 3 <= after.sum() <= len(after) - 3
     np.testing.assert_array_equal(k_s, 0)
     np.testing.assert_array_equal(k_c, 0)
-    np.testing.assert_array_equal(k_f, 1)  # the chute reached
+    np.testing.assert_array_equal(k_f[after], 1)  # the chute reached
     np.testing.assert_allclose(m_c, m_s, rtol=1e-12, atol=1e-6)
-    np.testing.assert_allclose(x_c, x_f, rtol=1e-12, atol=1e-6)
+    np.testing.assert_allclose(x_c[after], x_f[after], rtol=1e-12, atol=1e-6)
     np.testing.assert_array_equal(n_c, n_f)
-    drift = (x_c - x_s) / 1e3
+    drift = (x_c - x_s)[after] / 1e3
     assert 5.0 < np.median(np.abs(drift)) < 60.0
-    assert 1.4 * n_s.sum() < n_c.sum() < 2.5 * n_s.sum()
+    assert 1.4 * n_s[after].sum() < n_c[after].sum() < 2.5 * n_s[after].sum()
+    before = ~after
+    for m, x, k, n in ((m_c, x_c, k_c, n_c), (m_f, x_f, k_f, n_f)):
+        np.testing.assert_array_equal(k[before], 0)
+        np.testing.assert_array_equal(n[before], n_s[before])
+        np.testing.assert_allclose(m[before], m_s[before], rtol=1e-12, atol=1e-6)
+        np.testing.assert_allclose(x[before], x_s[before], rtol=1e-12, atol=1e-6)
 
 
 def test_a_prediction_without_a_switch_point_is_the_same_whatever_the_horizon(cycles):
@@ -90,22 +101,30 @@ def test_a_prediction_without_a_switch_point_is_the_same_whatever_the_horizon(cy
 
 
 def test_the_chute_crossrange_converges_with_the_predictor_step(cycles):
-    """The crossrange at the chute of the last cycles (after the pull-up, where 16 s and
-    1 s steps fly the same first entry) within 1 km of that of 1 s steps: the flight on and
-    the chute's location inside the last step are right, not only consistent."""
+    """The crossrange at the chute of the last cycles, flown in steps of 8 s and 4 s against
+    1 s steps: within 0.5 km at 4 s, and closer at 4 s than at 8 s (measured 0.2 and 1.2 km
+    at most): the flight on and the chute's location inside the last step are right, not
+    only consistent."""
     law, ctx, inputs = cycles
     on = dataclasses.replace(law, predictor_horizon="chute")
-    fine = dataclasses.replace(
-        on,
-        predictor_bank="step",
-        predictor_dt_s=1.0,
-        predictor_coast_dt_s=1.0,
-        predictor_max_steps=4000,
-    )
-    _, x, _, _ = predictions(on, ctx, inputs)
-    _, x_fine, k_fine, _ = predictions(fine, ctx, inputs)
-    np.testing.assert_array_equal(k_fine[-6:], 1)
-    assert np.max(np.abs(x[-6:] - x_fine[-6:])) < 1.0e3
+    late = jax.tree_util.tree_map(lambda x: x[-6:], inputs)
+
+    def chute_crossrange(dt, bank="midpoint"):
+        steps = dataclasses.replace(
+            on,
+            predictor_bank=bank,
+            predictor_dt_s=dt,
+            predictor_coast_dt_s=dt,
+            predictor_max_steps=4000,
+        )
+        _, x, k, _ = predictions(steps, ctx, late)
+        np.testing.assert_array_equal(k, 1)
+        return x
+
+    fine = chute_crossrange(1.0, bank="step")
+    err_8, err_4 = (np.max(np.abs(chute_crossrange(dt) - fine)) for dt in (8.0, 4.0))
+    assert err_4 < 0.5e3
+    assert err_4 < err_8
 
 
 def test_a_tracked_second_entry_flies_the_tracking_command_without_feedback(cycles):
@@ -132,20 +151,24 @@ def test_a_tracked_second_entry_flies_the_tracking_command_without_feedback(cycl
                 )
 
 
-def test_a_tracked_second_entry_flies_less_vertical_lift_for_a_higher_ld(cycles):
-    """Predictions flown on to the chute (``predictor_horizon = "chute"``): with the cycles'
-    measured ratios (lift above drag: an L/D over the model's), the tracked second entry
-    lands shorter than the reference bank's; with the lift ratio set to the drag ratio, the
-    two are the same to rounding."""
-    law, ctx, (y, t, up, sigma, model) = cycles
-    assert np.all(np.asarray(model.lift_ratio) > np.asarray(model.drag_ratio))
-    on = dataclasses.replace(law, predictor_horizon="chute")
+def test_a_tracked_second_entry_lands_as_its_ld_says(cycles):
+    """Predictions flown on to the chute (``predictor_horizon = "chute"``, the cycles after
+    the pull-up): with the cycles' measured ratios (an L/D 6 % under the model's), the
+    tracked second entry flies more vertical lift than the reference's bank and lands more
+    than a kilometre longer; with the lift ratio set to the drag ratio, the two are the same
+    to rounding."""
+    law, ctx, inputs = cycles
+    after = np.flatnonzero(np.asarray(inputs[2]))
+    y, t, up, sigma, model = jax.tree_util.tree_map(lambda x: x[after], inputs)
+    ld = np.asarray(model.lift_ratio / model.drag_ratio)
+    assert np.all(ld < 0.97)
+    on = dataclasses.replace(law, predictor_horizon="chute", second_entry_bank="reference")
     tracked = dataclasses.replace(on, second_entry_bank="tracked")
     m_ref, _, k_ref, _ = predictions(on, ctx, (y, t, up, sigma, model))
     m_tr, _, k_tr, _ = predictions(tracked, ctx, (y, t, up, sigma, model))
     np.testing.assert_array_equal(k_ref, 1)
     np.testing.assert_array_equal(k_tr, 1)
-    assert np.all(m_tr < m_ref - 1.0e3)
+    assert np.all(m_tr > m_ref + 1.0e3)
     same = dataclasses.replace(model, lift_ratio=model.drag_ratio)
     m_ref, x_ref, _, _ = predictions(on, ctx, (y, t, up, sigma, same))
     m_tr, x_tr, _, _ = predictions(tracked, ctx, (y, t, up, sigma, same))
