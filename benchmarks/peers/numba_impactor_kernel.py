@@ -191,7 +191,7 @@ def _normals(rng, n, out):
 # Dynamics
 
 
-@njit(**_JIT)
+@njit(inline="always", **_JIT)
 def _gravity(mu, tide, s0, s1, s2, x, y, z):
     """Point-mass gravity of the target + linearised solar tide at (x, y, z), m/s^2.
 
@@ -208,7 +208,7 @@ def _gravity(mu, tide, s0, s1, s2, x, y, z):
     return g0, g1, g2
 
 
-@njit(**_JIT)
+@njit(inline="always", **_JIT)
 def _rk4(mu, tide, s0, s1, s2, x, y, z, vx, vy, vz, m, fx, fy, fz, flow, dt):
     """One classical RK4 step of (r, v, m) with the thrust (N) and mass flow (kg/s) held."""
     h = 0.5 * dt
@@ -242,7 +242,7 @@ def _rk4(mu, tide, s0, s1, s2, x, y, z, vx, vy, vz, m, fx, fy, fz, flow, dt):
     )
 
 
-@njit(**_JIT)
+@njit(inline="always", **_JIT)
 def _coast_increment(vx, vy, vz, c):
     """The position change of :func:`_rk4_coast` without gravity terms (``c`` = dt / 6): it
     depends on the velocity only, which such a step keeps."""
@@ -253,7 +253,7 @@ def _coast_increment(vx, vy, vz, c):
     )
 
 
-@njit(**_JIT)
+@njit(inline="always", **_JIT)
 def _rk4_coast(mu, tide, s0, s1, s2, x, y, z, vx, vy, vz, dt):
     """:func:`_rk4` without thrust or mass flow (the same bits: those terms add zeros); without
     gravity terms every stage's velocity is v and the velocity stays (the same bits again)."""
@@ -286,7 +286,7 @@ _SINC = tuple((-1) ** n / math.factorial(2 * n + 1) for n in range(16))
 _COSC = tuple((-1) ** n / math.factorial(2 * n + 2) for n in range(16))
 
 
-@njit(**_JIT)
+@njit(inline="always", **_JIT)
 def _series(c, x):
     acc = c[15]
     for n in range(14, -1, -1):
@@ -294,7 +294,7 @@ def _series(c, x):
     return acc
 
 
-@njit(**_JIT)
+@njit(inline="always", **_JIT)
 def _rotate(t0, t1, t2, a0, a1, a2, b0, b1, b2, c0, c1, c2):
     """R C, row by row, for R the rotation of the rotation vector (t0, t1, t2) and C the rows
     (a, b, c): cos(a) I + (sin(a)/a) [t x] + ((1 - cos a)/a^2) t t^T with both ratios as
@@ -321,7 +321,7 @@ def _rotate(t0, t1, t2, a0, a1, a2, b0, b1, b2, c0, c1, c2):
     )
 
 
-@njit(**_JIT)
+@njit(inline="always", **_JIT)
 def _sigma_b(p, t_go, c_bi):
     """sqrt(sT^2 + sR^2) of the position covariance mapped to impact along a straight line
     (seed 000 eqs. 8-11): P_rr + t_go (P_rv + P_vr) + t_go^2 P_vv seen along T and R, m."""
@@ -343,7 +343,7 @@ def _sigma_b(p, t_go, c_bi):
     return np.sqrt(d)
 
 
-@njit(**_JIT)
+@njit(inline="always", **_JIT)
 def _plan(prm, c_bi, p, t, rh0, rh1, rh2, vh0, vh1, vh2):
     """The law's plan: sigma_B of the estimate, t_go = |aim - r_hat| / |v_hat| (eq. 9)."""
     a = AIM_FINAL if t >= prm[RETARGET] else AIM_INITIAL
@@ -355,7 +355,7 @@ def _plan(prm, c_bi, p, t, rh0, rh1, rh2, vh0, vh1, vh2):
     return _sigma_b(p, t_go, c_bi)
 
 
-@njit(**_JIT)
+@njit(inline="always", **_JIT)
 def _image_update(prm, c_bi, p, w, x, y, z, rh0, rh1, rh2, vh0, vh1, vh2, ab0, ab1, ab2, g):
     """One image and its EKF update: ``(r_hat, v_hat, squared LOS error)``; ``p`` updated in
     place, ``g`` (4 x 6) scratch. ``w``: the image's normals (front end, attitude control,
@@ -429,7 +429,7 @@ def _image_update(prm, c_bi, p, w, x, y, z, rh0, rh1, rh2, vh0, vh1, vh2, ab0, a
     )
 
 
-@njit(**_JIT)
+@njit(inline="always", **_JIT)
 def _grow_covariance(p, dt, q, q_dv):
     """P <- Phi P Phi^T + Q over ``dt`` in place (``navigation.packed_ekf.propagate_packed``):
     the position block first (it reads the old cross and velocity blocks), then the cross
