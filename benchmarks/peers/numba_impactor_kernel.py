@@ -453,6 +453,23 @@ def _grow_covariance(p, dt, q, q_dv):
         p[r, r] += q_vv
 
 
+@njit(inline="always", **_JIT)
+def _opens(rr, oo, qq, closing, open2):
+    """The hard switch's opening test multiplied out (``guidance.impactor.los._hard_switch``):
+    |omega| >= omega_open iff rho^2 > rho_o^2 and (opening range or |rho x rho_dot|^2
+    (rho^2 - rho_o^2) >= rho_o^2 (rho . rho_dot)^2); ``open2`` = rho_o^2."""
+    return rr > open2 and (not closing or oo * (rr - open2) >= open2 * qq)
+
+
+@njit(inline="always", **_JIT)
+def _floor_bounds(vv, close2, open2):
+    """``(1 / vv, whether the switching test may bound the floor a / vv by a (1 / vv))``: where
+    1 / vv and both tolerances are normal numbers (rounding then errs by 3 ulp at most)."""
+    inv_vv = 1.0 / vv
+    ok = 2.3e-308 <= inv_vv < 1e300 and 2.3e-308 <= close2 < 1e300 and 2.3e-308 <= open2 < 1e300
+    return inv_vv, ok
+
+
 @njit(**_JIT)
 def _outcome(prm, c_bi, coast_steps, x, y, z, vx, vy, vz, m, rh0, rh1, rh2, vh0, vh1, vh2, p, out):
     """Coast to the B-plane (RK4 over the straight-line time of flight, then the last gap) and
@@ -557,6 +574,7 @@ def _run(
         close_nav, open_nav = k2sq * sb2, k1sq * sb2
         # Loop invariants while coasting, recomputed after each burn step (the same bits).
         vv = vh0 * vh0 + vh1 * vh1 + vh2 * vh2
+        inv_vv, bounds_ok = _floor_bounds(vv, close_nav, open_nav)
         dh0, dh1, dh2 = vh0 * dt, vh1 * dt, vh2 * dt
         dx, dy, dz = _coast_increment(vx, vy, vz, c6)
         # Execution draws of this interval's ignitions (fed: gnc_jax's burn-table row).
@@ -580,18 +598,33 @@ def _run(
                 qv = -(q0 * vh0 + q1 * vh1 + q2 * vh2)  # rho . rho_dot
                 o0, o1, o2 = q1 * vh2 - q2 * vh1, q2 * vh0 - q0 * vh2, q0 * vh1 - q1 * vh0
                 oo = o0 * o0 + o1 * o1 + o2 * o2  # |rho x rho_dot|^2
-                close2 = max(close_nav, c_res2 * rr / vv)  # the one-step floor (miss_limits)
-                open2 = max(open_nav, close2)
+                a_floor = c_res2 * rr  # the one-step floor (miss_limits): a_floor / vv
                 qq = qv * qv
                 closing = qv < 0.0
-                if rr > open2 and (not closing or oo * (rr - open2) >= open2 * qq):
-                    engine_on = 1.0
-                elif (
-                    rr <= close2
-                    or (closing and oo * (rr - close2) <= close2 * qq)
-                    or (not closing and oo == 0.0 and qv == 0.0)
-                ):
-                    engine_on = 0.0
+                # The engine off stays off unless the opening test passes, and that test only
+                # gets harder as rho_o^2 grows: where it fails at a lower bound of rho_o^2 the
+                # floor's division is not needed (a_floor / vv rounded is within a_floor *
+                # (1 / vv) (1 +- 2^-50) where both are normal numbers).
+                a_lo = a_floor * inv_vv
+                if not (
+                    engine_on == 0.0
+                    and bounds_ok
+                    and 2.3e-308 <= a_lo < 1e300
+                    and not _opens(
+                        rr, oo, qq, closing,
+                        max(open_nav, max(close_nav, a_lo * (1.0 - 2.0**-50))),
+                    )
+                ):  # fmt: skip
+                    close2 = max(close_nav, a_floor / vv)
+                    open2 = max(open_nav, close2)
+                    if _opens(rr, oo, qq, closing, open2):
+                        engine_on = 1.0
+                    elif (
+                        rr <= close2
+                        or (closing and oo * (rr - close2) <= close2 * qq)
+                        or (not closing and oo == 0.0 and qv == 0.0)
+                    ):
+                        engine_on = 0.0
                 throttle = engine_on
             else:
                 engine_on = 0.0
@@ -636,6 +669,7 @@ def _run(
                 rh2 = rh2 + vh2 * dt + dm2 * (0.5 * dt)
                 vh0, vh1, vh2 = vh0 + dm0, vh1 + dm1, vh2 + dm2
                 vv = vh0 * vh0 + vh1 * vh1 + vh2 * vh2
+                inv_vv, bounds_ok = _floor_bounds(vv, close_nav, open_nav)
                 dh0, dh1, dh2 = vh0 * dt, vh1 * dt, vh2 * dt
                 dx, dy, dz = _coast_increment(vx, vy, vz, c6)
                 th2 = throttle * throttle
