@@ -135,10 +135,9 @@ def seed_generator(state, seed):
         x, state[j] = _splitmix64(x)
 
 
-@njit(**_JIT)
-def next_u64(s):
-    """xoshiro256** (Blackman and Vigna): the next 64 random bits of the state ``s``."""
-    s0, s1, s2, s3 = s[0], s[1], s[2], s[3]
+@njit(inline="always", **_JIT)
+def _xoshiro(s0, s1, s2, s3):
+    """xoshiro256** (Blackman and Vigna): ``(the next 64 random bits, the next state)``."""
     x = s1 * _FIVE
     result = ((x << _U7) | (x >> _U57)) * _NINE
     t = s1 << _U17
@@ -147,8 +146,14 @@ def next_u64(s):
     s1 ^= s2
     s0 ^= s3
     s2 ^= t
-    s[0], s[1], s[2], s[3] = s0, s1, s2, (s3 << _U45) | (s3 >> _U19)
-    return result
+    return result, s0, s1, s2, (s3 << _U45) | (s3 >> _U19)
+
+
+@njit(**_JIT)
+def next_u64(s):
+    """The next 64 random bits of the xoshiro256** state ``s`` (4 uint64, updated)."""
+    r, s[0], s[1], s[2], s[3] = _xoshiro(s[0], s[1], s[2], s[3])
+    return r
 
 
 @njit(**_JIT)
@@ -158,11 +163,30 @@ def _uniform(s):
 
 
 @njit(**_JIT)
-def standard_normal(s):
-    """One standard normal by the ziggurat (numpy's ``random_standard_normal``): one 64-bit
-    draw and a table comparison 98.8 % of the time."""
-    while True:
-        r = next_u64(s)
+def _ziggurat_edge(s, idx, rabs, x):
+    """The ziggurat's rare cases (1.2 % of the draws), after the layer test failed for the
+    candidate ``x`` of layer ``idx``: ``(accepted, value)``; not accepted, the caller draws
+    afresh."""
+    if idx == 0:  # the tail beyond ZIGGURAT_R (Marsaglia's exponential method)
+        while True:
+            xx = -np.log1p(-_uniform(s)) / ZIGGURAT_R
+            yy = -np.log1p(-_uniform(s))
+            if yy + yy > xx * xx:
+                return True, -(ZIGGURAT_R + xx) if (rabs >> _U8) & _U1 else ZIGGURAT_R + xx
+    if (_ZIG_F[idx - 1] - _ZIG_F[idx]) * _uniform(s) + _ZIG_F[idx] < np.exp(-0.5 * x * x):
+        return True, x
+    return False, x
+
+
+@njit(inline="always", **_JIT)
+def _normals(rng, n, out):
+    """``n`` standard normals into ``out`` by the ziggurat (numpy's
+    ``random_standard_normal``): one 64-bit draw and a table comparison 98.8 % of the time,
+    the generator's state ``rng`` held in registers meanwhile."""
+    s0, s1, s2, s3 = rng[0], rng[1], rng[2], rng[3]
+    i = 0
+    while i < n:
+        r, s0, s1, s2, s3 = _xoshiro(s0, s1, s2, s3)
         idx = np.intp(r & _BYTE)
         r = r >> _U8
         rabs = (r >> _U1) & _MANTISSA
@@ -170,21 +194,16 @@ def standard_normal(s):
         if r & _U1:
             x = -x
         if rabs < _ZIG_K[idx]:
-            return x
-        if idx == 0:  # the tail beyond ZIGGURAT_R (Marsaglia's exponential method)
-            while True:
-                xx = -np.log1p(-_uniform(s)) / ZIGGURAT_R
-                yy = -np.log1p(-_uniform(s))
-                if yy + yy > xx * xx:
-                    return -(ZIGGURAT_R + xx) if (rabs >> _U8) & _U1 else ZIGGURAT_R + xx
-        elif (_ZIG_F[idx - 1] - _ZIG_F[idx]) * _uniform(s) + _ZIG_F[idx] < np.exp(-0.5 * x * x):
-            return x
-
-
-@njit(**_JIT)
-def _normals(rng, n, out):
-    for i in range(n):
-        out[i] = standard_normal(rng)
+            out[i] = x
+            i += 1
+            continue
+        rng[0], rng[1], rng[2], rng[3] = s0, s1, s2, s3
+        accepted, x = _ziggurat_edge(rng, idx, rabs, x)
+        s0, s1, s2, s3 = rng[0], rng[1], rng[2], rng[3]
+        if accepted:
+            out[i] = x
+            i += 1
+    rng[0], rng[1], rng[2], rng[3] = s0, s1, s2, s3
 
 
 # --------------------------------------------------------------------------------------------
