@@ -473,6 +473,25 @@ def _grow_covariance(p, dt, q, q_dv):
 
 
 @njit(inline="always", **_JIT)
+def _first_step(t_img, dt, steps, t_event, at_or_after):
+    """The first step k of ``0..steps-1`` whose time t = t_img + k dt is ``>= t_event``
+    (``at_or_after``) or not ``< t_event`` (the loop's two comparisons, the same where a time
+    is NaN), else ``steps``. t rounded grows with k (dt > 0): the first and last steps decide
+    for all but the interval that holds the event."""
+    k = 0
+    while k < steps:
+        t = t_img + dt * k
+        if (t >= t_event) if at_or_after else not (t < t_event):
+            return k
+        if k == 0:  # the last step: if it is before the event, so are all
+            t = t_img + dt * (steps - 1)
+            if not ((t >= t_event) if at_or_after else not (t < t_event)):
+                return steps
+        k += 1
+    return steps
+
+
+@njit(inline="always", **_JIT)
 def _opens(rr, oo, qq, closing, open2):
     """The hard switch's opening test multiplied out (``guidance.impactor.los._hard_switch``):
     |omega| >= omega_open iff rho^2 > rho_o^2 and (opening range or |rho x rho_dot|^2
@@ -601,15 +620,17 @@ def _run(
         ignitions_image = 0
         mom_a = mom_b = mom_c = 0.0
         burn_image = 0.0
+        # The steps at which t = t_img + k dt reaches the cutoff and the retarget time.
+        k_cut = _first_step(t_img, dt, steps, cutoff, False)
+        k_ret = _first_step(t_img, dt, steps, retarget, True)
         for k in range(steps if do_steps else 0):
-            t = t_img + dt * k
             throttle = 0.0
-            if t < cutoff:
+            if k < k_cut:
                 # The hard switch multiplied out (guidance.impactor.los._hard_switch):
                 # |omega| >= omega_open iff rho^2 > rho_o^2 and (opening range or
                 # |rho x rho_dot|^2 (rho^2 - rho_o^2) >= rho_o^2 (rho . rho_dot)^2); likewise
                 # for closing at rho_c.
-                if t >= retarget:
+                if k >= k_ret:
                     q0, q1, q2 = af0 - rh0, af1 - rh1, af2 - rh2  # rho; rho_dot = -v_hat
                 else:
                     q0, q1, q2 = ai0 - rh0, ai1 - rh1, ai2 - rh2
