@@ -9,6 +9,22 @@ nonzero (``RelativeDynamics.of``), the filter's two scalar updates with 1/s
 (``navigation.packed_ekf.los_gain``), the attitude rotations composed row by row
 (``navigation.camera.rotate_rows``).
 
+Where the time goes (the benchmark's profile rows: about a third in the control steps, the rest
+in the image updates) decided the rest, each change leaving every outcome the same to the bit:
+
+* the helpers of the step and of the image are inlined (``inline="always"``): numba calls
+  another jitted function out of line, its arrays passed as a dozen scalars each;
+* the step compares integers with the steps of the cutoff and the retarget, found once per
+  image interval, instead of forming each step's time;
+* the switching test divides for the one-step floor only where the engine may open: with the
+  engine off, a lower bound of the floor that already keeps it off decides (the test grows
+  harder with the floor, so the decision is the one the division would give);
+* the generator's state stays in registers over a draw of several normals, the ziggurat's rare
+  cases out of line.
+
+The image update is bound by the latency of its square roots and divisions (the camera frame,
+the filter's two gains, sigma_B), not by its arithmetic.
+
 The own-draws kernel draws with xoshiro256** (seeded per run by splitmix64 of ``seed + i``)
 and the ziggurat method (256 layers, 52-bit mantissas, as numpy's ``Generator``).
 
