@@ -392,10 +392,22 @@ def _plan(prm, c_bi, p, t, rh0, rh1, rh2, vh0, vh1, vh2):
 
 
 @njit(inline="always", **_JIT)
-def _image_update(prm, c_bi, p, w, x, y, z, rh0, rh1, rh2, vh0, vh1, vh2, ab0, ab1, ab2, g):
+def _times_h(p, h0, h1, h2):
+    """P h^T for h = (h0, h1, h2, 0, 0, 0) (the LOS Jacobian has no velocity columns)."""
+    return (
+        p[0, 0] * h0 + p[0, 1] * h1 + p[0, 2] * h2,
+        p[1, 0] * h0 + p[1, 1] * h1 + p[1, 2] * h2,
+        p[2, 0] * h0 + p[2, 1] * h1 + p[2, 2] * h2,
+        p[3, 0] * h0 + p[3, 1] * h1 + p[3, 2] * h2,
+        p[4, 0] * h0 + p[4, 1] * h1 + p[4, 2] * h2,
+        p[5, 0] * h0 + p[5, 1] * h1 + p[5, 2] * h2,
+    )
+
+
+@njit(inline="always", **_JIT)
+def _image_update(prm, c_bi, p, w, x, y, z, rh0, rh1, rh2, vh0, vh1, vh2, ab0, ab1, ab2):
     """One image and its EKF update: ``(r_hat, v_hat, squared LOS error)``; ``p`` updated in
-    place, ``g`` (4 x 6) scratch. ``w``: the image's normals (front end, attitude control,
-    attitude knowledge)."""
+    place. ``w``: the image's normals (front end, attitude control, attitude knowledge)."""
     sig_ctrl, sig_noise = prm[SIG_ATT_CONTROL], prm[SIG_ATT_NOISE]
     r_var = prm[SIG_IMAGE] * prm[SIG_IMAGE] + sig_noise * sig_noise
     # Camera pointed at the estimated target direction (roll from the B-plane R axis).
@@ -435,32 +447,33 @@ def _image_update(prm, c_bi, p, w, x, y, z, rh0, rh1, rh2, vh0, vh1, vh2, ab0, a
     sig_front = prm[SIG_FRONT_END]
     zm0, zm1 = zt0 + sig_front * w[0], zt1 + sig_front * w[1]
     # Two scalar updates (packed_ekf.los_gain): u = P h^T, s = h u + r, w = u / s, the second
-    # angle's u and innovation at the prior's linearisation point; g rows: u1, w1, u2, w2.
-    for r in range(6):
-        g[0, r] = p[r, 0] * h00 + p[r, 1] * h01 + p[r, 2] * h02
-    inv1 = 1.0 / (g[0, 0] * h00 + g[0, 1] * h01 + g[0, 2] * h02 + r_var + S_FLOOR)
+    # angle's u and innovation at the prior's linearisation point (6-tuples, in registers).
+    u1 = _times_h(p, h00, h01, h02)
+    inv1 = 1.0 / (u1[0] * h00 + u1[1] * h01 + u1[2] * h02 + r_var + S_FLOOR)
     gain1 = (zm0 - zp0) * inv1
-    c12 = g[0, 0] * h10 + g[0, 1] * h11 + g[0, 2] * h12
-    for r in range(6):
-        g[1, r] = g[0, r] * inv1
-        g[2, r] = (p[r, 0] * h10 + p[r, 1] * h11 + p[r, 2] * h12) - g[1, r] * c12
-    inv2 = 1.0 / (g[2, 0] * h10 + g[2, 1] * h11 + g[2, 2] * h12 + r_var + S_FLOOR)
-    da, db, dc = g[0, 0] * gain1, g[0, 1] * gain1, g[0, 2] * gain1
+    c12 = u1[0] * h10 + u1[1] * h11 + u1[2] * h12
+    w1 = (u1[0] * inv1, u1[1] * inv1, u1[2] * inv1, u1[3] * inv1, u1[4] * inv1, u1[5] * inv1)
+    ph = _times_h(p, h10, h11, h12)
+    u2 = (
+        ph[0] - w1[0] * c12, ph[1] - w1[1] * c12, ph[2] - w1[2] * c12,
+        ph[3] - w1[3] * c12, ph[4] - w1[4] * c12, ph[5] - w1[5] * c12,
+    )  # fmt: skip
+    inv2 = 1.0 / (u2[0] * h10 + u2[1] * h11 + u2[2] * h12 + r_var + S_FLOOR)
+    da, db, dc = u1[0] * gain1, u1[1] * gain1, u1[2] * gain1
     gain2 = ((zm1 - zp1) - (h10 * da + h11 * db + h12 * dc)) * inv2
-    for r in range(6):
-        g[3, r] = g[2, r] * inv2
+    w2 = (u2[0] * inv2, u2[1] * inv2, u2[2] * inv2, u2[3] * inv2, u2[4] * inv2, u2[5] * inv2)
     for r in range(6):
         for c in range(r, 6):
-            v = p[r, c] - g[1, r] * g[0, c] - g[3, r] * g[2, c]
+            v = p[r, c] - w1[r] * u1[c] - w2[r] * u2[c]
             p[r, c] = v
             p[c, r] = v
     return (
-        rh0 + (da + g[2, 0] * gain2),
-        rh1 + (db + g[2, 1] * gain2),
-        rh2 + (dc + g[2, 2] * gain2),
-        vh0 + (g[0, 3] * gain1 + g[2, 3] * gain2),
-        vh1 + (g[0, 4] * gain1 + g[2, 4] * gain2),
-        vh2 + (g[0, 5] * gain1 + g[2, 5] * gain2),
+        rh0 + (da + u2[0] * gain2),
+        rh1 + (db + u2[1] * gain2),
+        rh2 + (dc + u2[2] * gain2),
+        vh0 + (u1[3] * gain1 + u2[3] * gain2),
+        vh1 + (u1[4] * gain1 + u2[4] * gain2),
+        vh2 + (u1[5] * gain1 + u2[5] * gain2),
         (zm0 - zt0) ** 2 + (zm1 - zt1) ** 2,
     )
 
@@ -600,7 +613,6 @@ def _run(
     ab0, ab1, ab2 = prm[SIG_ATT_BIAS] * w[9], prm[SIG_ATT_BIAS] * w[10], prm[SIG_ATT_BIAS] * w[11]
     ba0, ba1, ba2 = acc_sig * w[12], acc_sig * w[13], acc_sig * w[14]
     p = p0.copy()
-    g = np.empty((4, 6))  # the filter update's u and w rows
 
     engine_on = 0.0
     sigma_b = _plan(prm, c_bi, p, 0.0, rh0, rh1, rh2, vh0, vh1, vh2)
@@ -619,7 +631,7 @@ def _run(
             w[:IMAGE_DRAWS] = images[i, :IMAGE_DRAWS]
         if do_images:
             rh0, rh1, rh2, vh0, vh1, vh2, err2 = _image_update(
-                prm, c_bi, p, w, x, y, z, rh0, rh1, rh2, vh0, vh1, vh2, ab0, ab1, ab2, g
+                prm, c_bi, p, w, x, y, z, rh0, rh1, rh2, vh0, vh1, vh2, ab0, ab1, ab2
             )
             los_error_sq += err2
             images_used += 1
