@@ -6,15 +6,15 @@ A scalar transcription of `gnc_jax.systems.impactor.simulation.simulate` with th
 curve law, as an expert numba user would write it (the kernel:
 ``benchmarks/peers/numba_impactor_kernel.py``): ``@njit(parallel=True)`` with ``prange`` over runs,
 scalar code inside (vectors as three floats, the 6x6 covariance in one array per run), nothing
-allocated per step, loop invariants of the coasting steps hoisted, and branches where the work is
-conditional (the engine fires in about 0.5 % of the control steps). Same truth (RK4 of the target's
-point-mass gravity + solar tide, thrust and mass flow held over the step), same camera and Gaussian
-LOS front end, same EKF (closed-form LOS Jacobian, the two angles' scalar updates written out,
-straight-line covariance growth, attitude-error rotations from power series), same law (error
-ellipse at each image, switching curves of k1 and k2 sigma_B with the one-step floor, Schmitt
-trigger compared multiplied out as gnc_jax compares it, zero-effort-miss thrust direction), same
-error sources and the same outcome (coast to the B-plane, miss, Δv, firings, fuel, status
-``propellant``). Every number comes from ``gj.build(scenario)``; nothing is copied by hand.
+allocated per step, the helpers inlined, loop invariants of the coasting steps hoisted, and branches
+where the work is conditional (the engine fires in about 0.5 % of the control steps). Same truth
+(RK4 of the target's point-mass gravity + solar tide, thrust and mass flow held over the step), same
+camera and Gaussian LOS front end, same EKF (closed-form LOS Jacobian, the two angles' scalar
+updates written out, straight-line covariance growth, attitude-error rotations from power series),
+same law (error ellipse at each image, switching curves of k1 and k2 sigma_B with the one-step
+floor, Schmitt trigger compared multiplied out as gnc_jax compares it, zero-effort-miss thrust
+direction), same error sources and the same outcome (coast to the B-plane, miss, Δv, firings, fuel,
+status ``propellant``). Every number comes from ``gj.build(scenario)``; nothing is copied by hand.
 
 Two ways to feed it random numbers:
 

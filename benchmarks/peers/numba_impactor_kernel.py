@@ -9,6 +9,23 @@ nonzero (``RelativeDynamics.of``), the filter's two scalar updates with 1/s
 (``navigation.packed_ekf.los_gain``), the attitude rotations composed row by row
 (``navigation.camera.rotate_rows``).
 
+Where the time goes (the benchmark's profile rows: about a third in the control steps, the rest
+in the image updates) decided the rest, each change leaving every outcome the same to the bit:
+
+* the helpers of the coasting step and of the image are inlined (``inline="always"``): numba
+  calls another jitted function out of line, its arrays passed as a dozen scalars each (the
+  burn step stays out of line: inlining costs compile time, about 6 s for the fed kernel);
+* the step compares integers with the steps of the cutoff and the retarget, found once per
+  image interval, instead of forming each step's time;
+* the switching test divides for the one-step floor only where the engine may open: with the
+  engine off, a lower bound of the floor that already keeps it off decides (the test grows
+  harder with the floor, so the decision is the one the division would give);
+* the generator's state stays in registers over a draw of several normals, the ziggurat's rare
+  cases out of line.
+
+The image update is bound by the latency of its square roots and divisions (the camera frame,
+the filter's two gains, sigma_B), not by its arithmetic.
+
 The own-draws kernel draws with xoshiro256** (seeded per run by splitmix64 of ``seed + i``)
 and the ziggurat method (256 layers, 52-bit mantissas, as numpy's ``Generator``).
 
@@ -135,10 +152,9 @@ def seed_generator(state, seed):
         x, state[j] = _splitmix64(x)
 
 
-@njit(**_JIT)
-def next_u64(s):
-    """xoshiro256** (Blackman and Vigna): the next 64 random bits of the state ``s``."""
-    s0, s1, s2, s3 = s[0], s[1], s[2], s[3]
+@njit(inline="always", **_JIT)
+def _xoshiro(s0, s1, s2, s3):
+    """xoshiro256** (Blackman and Vigna): ``(the next 64 random bits, the next state)``."""
     x = s1 * _FIVE
     result = ((x << _U7) | (x >> _U57)) * _NINE
     t = s1 << _U17
@@ -147,8 +163,14 @@ def next_u64(s):
     s1 ^= s2
     s0 ^= s3
     s2 ^= t
-    s[0], s[1], s[2], s[3] = s0, s1, s2, (s3 << _U45) | (s3 >> _U19)
-    return result
+    return result, s0, s1, s2, (s3 << _U45) | (s3 >> _U19)
+
+
+@njit(**_JIT)
+def next_u64(s):
+    """The next 64 random bits of the xoshiro256** state ``s`` (4 uint64, updated)."""
+    r, s[0], s[1], s[2], s[3] = _xoshiro(s[0], s[1], s[2], s[3])
+    return r
 
 
 @njit(**_JIT)
@@ -158,11 +180,30 @@ def _uniform(s):
 
 
 @njit(**_JIT)
-def standard_normal(s):
-    """One standard normal by the ziggurat (numpy's ``random_standard_normal``): one 64-bit
-    draw and a table comparison 98.8 % of the time."""
-    while True:
-        r = next_u64(s)
+def _ziggurat_edge(s, idx, rabs, x):
+    """The ziggurat's rare cases (1.2 % of the draws), after the layer test failed for the
+    candidate ``x`` of layer ``idx``: ``(accepted, value)``; not accepted, the caller draws
+    afresh."""
+    if idx == 0:  # the tail beyond ZIGGURAT_R (Marsaglia's exponential method)
+        while True:
+            xx = -np.log1p(-_uniform(s)) / ZIGGURAT_R
+            yy = -np.log1p(-_uniform(s))
+            if yy + yy > xx * xx:
+                return True, -(ZIGGURAT_R + xx) if (rabs >> _U8) & _U1 else ZIGGURAT_R + xx
+    if (_ZIG_F[idx - 1] - _ZIG_F[idx]) * _uniform(s) + _ZIG_F[idx] < np.exp(-0.5 * x * x):
+        return True, x
+    return False, x
+
+
+@njit(inline="always", **_JIT)
+def _normals(rng, n, out):
+    """``n`` standard normals into ``out`` by the ziggurat (numpy's
+    ``random_standard_normal``): one 64-bit draw and a table comparison 98.8 % of the time,
+    the generator's state ``rng`` held in registers meanwhile."""
+    s0, s1, s2, s3 = rng[0], rng[1], rng[2], rng[3]
+    i = 0
+    while i < n:
+        r, s0, s1, s2, s3 = _xoshiro(s0, s1, s2, s3)
         idx = np.intp(r & _BYTE)
         r = r >> _U8
         rabs = (r >> _U1) & _MANTISSA
@@ -170,28 +211,23 @@ def standard_normal(s):
         if r & _U1:
             x = -x
         if rabs < _ZIG_K[idx]:
-            return x
-        if idx == 0:  # the tail beyond ZIGGURAT_R (Marsaglia's exponential method)
-            while True:
-                xx = -np.log1p(-_uniform(s)) / ZIGGURAT_R
-                yy = -np.log1p(-_uniform(s))
-                if yy + yy > xx * xx:
-                    return -(ZIGGURAT_R + xx) if (rabs >> _U8) & _U1 else ZIGGURAT_R + xx
-        elif (_ZIG_F[idx - 1] - _ZIG_F[idx]) * _uniform(s) + _ZIG_F[idx] < np.exp(-0.5 * x * x):
-            return x
-
-
-@njit(**_JIT)
-def _normals(rng, n, out):
-    for i in range(n):
-        out[i] = standard_normal(rng)
+            out[i] = x
+            i += 1
+            continue
+        rng[0], rng[1], rng[2], rng[3] = s0, s1, s2, s3
+        accepted, x = _ziggurat_edge(rng, idx, rabs, x)
+        s0, s1, s2, s3 = rng[0], rng[1], rng[2], rng[3]
+        if accepted:
+            out[i] = x
+            i += 1
+    rng[0], rng[1], rng[2], rng[3] = s0, s1, s2, s3
 
 
 # --------------------------------------------------------------------------------------------
 # Dynamics
 
 
-@njit(**_JIT)
+@njit(inline="always", **_JIT)
 def _gravity(mu, tide, s0, s1, s2, x, y, z):
     """Point-mass gravity of the target + linearised solar tide at (x, y, z), m/s^2.
 
@@ -242,7 +278,7 @@ def _rk4(mu, tide, s0, s1, s2, x, y, z, vx, vy, vz, m, fx, fy, fz, flow, dt):
     )
 
 
-@njit(**_JIT)
+@njit(inline="always", **_JIT)
 def _coast_increment(vx, vy, vz, c):
     """The position change of :func:`_rk4_coast` without gravity terms (``c`` = dt / 6): it
     depends on the velocity only, which such a step keeps."""
@@ -253,7 +289,7 @@ def _coast_increment(vx, vy, vz, c):
     )
 
 
-@njit(**_JIT)
+@njit(inline="always", **_JIT)
 def _rk4_coast(mu, tide, s0, s1, s2, x, y, z, vx, vy, vz, dt):
     """:func:`_rk4` without thrust or mass flow (the same bits: those terms add zeros); without
     gravity terms every stage's velocity is v and the velocity stays (the same bits again)."""
@@ -286,7 +322,7 @@ _SINC = tuple((-1) ** n / math.factorial(2 * n + 1) for n in range(16))
 _COSC = tuple((-1) ** n / math.factorial(2 * n + 2) for n in range(16))
 
 
-@njit(**_JIT)
+@njit(inline="always", **_JIT)
 def _series(c, x):
     acc = c[15]
     for n in range(14, -1, -1):
@@ -294,7 +330,7 @@ def _series(c, x):
     return acc
 
 
-@njit(**_JIT)
+@njit(inline="always", **_JIT)
 def _rotate(t0, t1, t2, a0, a1, a2, b0, b1, b2, c0, c1, c2):
     """R C, row by row, for R the rotation of the rotation vector (t0, t1, t2) and C the rows
     (a, b, c): cos(a) I + (sin(a)/a) [t x] + ((1 - cos a)/a^2) t t^T with both ratios as
@@ -321,7 +357,7 @@ def _rotate(t0, t1, t2, a0, a1, a2, b0, b1, b2, c0, c1, c2):
     )
 
 
-@njit(**_JIT)
+@njit(inline="always", **_JIT)
 def _sigma_b(p, t_go, c_bi):
     """sqrt(sT^2 + sR^2) of the position covariance mapped to impact along a straight line
     (seed 000 eqs. 8-11): P_rr + t_go (P_rv + P_vr) + t_go^2 P_vv seen along T and R, m."""
@@ -343,7 +379,7 @@ def _sigma_b(p, t_go, c_bi):
     return np.sqrt(d)
 
 
-@njit(**_JIT)
+@njit(inline="always", **_JIT)
 def _plan(prm, c_bi, p, t, rh0, rh1, rh2, vh0, vh1, vh2):
     """The law's plan: sigma_B of the estimate, t_go = |aim - r_hat| / |v_hat| (eq. 9)."""
     a = AIM_FINAL if t >= prm[RETARGET] else AIM_INITIAL
@@ -355,11 +391,23 @@ def _plan(prm, c_bi, p, t, rh0, rh1, rh2, vh0, vh1, vh2):
     return _sigma_b(p, t_go, c_bi)
 
 
-@njit(**_JIT)
-def _image_update(prm, c_bi, p, w, x, y, z, rh0, rh1, rh2, vh0, vh1, vh2, ab0, ab1, ab2, g):
+@njit(inline="always", **_JIT)
+def _times_h(p, h0, h1, h2):
+    """P h^T for h = (h0, h1, h2, 0, 0, 0) (the LOS Jacobian has no velocity columns)."""
+    return (
+        p[0, 0] * h0 + p[0, 1] * h1 + p[0, 2] * h2,
+        p[1, 0] * h0 + p[1, 1] * h1 + p[1, 2] * h2,
+        p[2, 0] * h0 + p[2, 1] * h1 + p[2, 2] * h2,
+        p[3, 0] * h0 + p[3, 1] * h1 + p[3, 2] * h2,
+        p[4, 0] * h0 + p[4, 1] * h1 + p[4, 2] * h2,
+        p[5, 0] * h0 + p[5, 1] * h1 + p[5, 2] * h2,
+    )
+
+
+@njit(inline="always", **_JIT)
+def _image_update(prm, c_bi, p, w, x, y, z, rh0, rh1, rh2, vh0, vh1, vh2, ab0, ab1, ab2):
     """One image and its EKF update: ``(r_hat, v_hat, squared LOS error)``; ``p`` updated in
-    place, ``g`` (4 x 6) scratch. ``w``: the image's normals (front end, attitude control,
-    attitude knowledge)."""
+    place. ``w``: the image's normals (front end, attitude control, attitude knowledge)."""
     sig_ctrl, sig_noise = prm[SIG_ATT_CONTROL], prm[SIG_ATT_NOISE]
     r_var = prm[SIG_IMAGE] * prm[SIG_IMAGE] + sig_noise * sig_noise
     # Camera pointed at the estimated target direction (roll from the B-plane R axis).
@@ -399,37 +447,38 @@ def _image_update(prm, c_bi, p, w, x, y, z, rh0, rh1, rh2, vh0, vh1, vh2, ab0, a
     sig_front = prm[SIG_FRONT_END]
     zm0, zm1 = zt0 + sig_front * w[0], zt1 + sig_front * w[1]
     # Two scalar updates (packed_ekf.los_gain): u = P h^T, s = h u + r, w = u / s, the second
-    # angle's u and innovation at the prior's linearisation point; g rows: u1, w1, u2, w2.
-    for r in range(6):
-        g[0, r] = p[r, 0] * h00 + p[r, 1] * h01 + p[r, 2] * h02
-    inv1 = 1.0 / (g[0, 0] * h00 + g[0, 1] * h01 + g[0, 2] * h02 + r_var + S_FLOOR)
+    # angle's u and innovation at the prior's linearisation point (6-tuples, in registers).
+    u1 = _times_h(p, h00, h01, h02)
+    inv1 = 1.0 / (u1[0] * h00 + u1[1] * h01 + u1[2] * h02 + r_var + S_FLOOR)
     gain1 = (zm0 - zp0) * inv1
-    c12 = g[0, 0] * h10 + g[0, 1] * h11 + g[0, 2] * h12
-    for r in range(6):
-        g[1, r] = g[0, r] * inv1
-        g[2, r] = (p[r, 0] * h10 + p[r, 1] * h11 + p[r, 2] * h12) - g[1, r] * c12
-    inv2 = 1.0 / (g[2, 0] * h10 + g[2, 1] * h11 + g[2, 2] * h12 + r_var + S_FLOOR)
-    da, db, dc = g[0, 0] * gain1, g[0, 1] * gain1, g[0, 2] * gain1
+    c12 = u1[0] * h10 + u1[1] * h11 + u1[2] * h12
+    w1 = (u1[0] * inv1, u1[1] * inv1, u1[2] * inv1, u1[3] * inv1, u1[4] * inv1, u1[5] * inv1)
+    ph = _times_h(p, h10, h11, h12)
+    u2 = (
+        ph[0] - w1[0] * c12, ph[1] - w1[1] * c12, ph[2] - w1[2] * c12,
+        ph[3] - w1[3] * c12, ph[4] - w1[4] * c12, ph[5] - w1[5] * c12,
+    )  # fmt: skip
+    inv2 = 1.0 / (u2[0] * h10 + u2[1] * h11 + u2[2] * h12 + r_var + S_FLOOR)
+    da, db, dc = u1[0] * gain1, u1[1] * gain1, u1[2] * gain1
     gain2 = ((zm1 - zp1) - (h10 * da + h11 * db + h12 * dc)) * inv2
-    for r in range(6):
-        g[3, r] = g[2, r] * inv2
+    w2 = (u2[0] * inv2, u2[1] * inv2, u2[2] * inv2, u2[3] * inv2, u2[4] * inv2, u2[5] * inv2)
     for r in range(6):
         for c in range(r, 6):
-            v = p[r, c] - g[1, r] * g[0, c] - g[3, r] * g[2, c]
+            v = p[r, c] - w1[r] * u1[c] - w2[r] * u2[c]
             p[r, c] = v
             p[c, r] = v
     return (
-        rh0 + (da + g[2, 0] * gain2),
-        rh1 + (db + g[2, 1] * gain2),
-        rh2 + (dc + g[2, 2] * gain2),
-        vh0 + (g[0, 3] * gain1 + g[2, 3] * gain2),
-        vh1 + (g[0, 4] * gain1 + g[2, 4] * gain2),
-        vh2 + (g[0, 5] * gain1 + g[2, 5] * gain2),
+        rh0 + (da + u2[0] * gain2),
+        rh1 + (db + u2[1] * gain2),
+        rh2 + (dc + u2[2] * gain2),
+        vh0 + (u1[3] * gain1 + u2[3] * gain2),
+        vh1 + (u1[4] * gain1 + u2[4] * gain2),
+        vh2 + (u1[5] * gain1 + u2[5] * gain2),
         (zm0 - zt0) ** 2 + (zm1 - zt1) ** 2,
     )
 
 
-@njit(**_JIT)
+@njit(inline="always", **_JIT)
 def _grow_covariance(p, dt, q, q_dv):
     """P <- Phi P Phi^T + Q over ``dt`` in place (``navigation.packed_ekf.propagate_packed``):
     the position block first (it reads the old cross and velocity blocks), then the cross
@@ -451,6 +500,42 @@ def _grow_covariance(p, dt, q, q_dv):
             p[c, r] = v
     for r in range(3, 6):
         p[r, r] += q_vv
+
+
+@njit(inline="always", **_JIT)
+def _first_step(t_img, dt, steps, t_event, at_or_after):
+    """The first step k of ``0..steps-1`` whose time t = t_img + k dt is ``>= t_event``
+    (``at_or_after``) or not ``< t_event`` (the loop's two comparisons, the same where a time
+    is NaN), else ``steps``. t rounded grows with k (dt > 0): the first and last steps decide
+    for all but the interval that holds the event."""
+    k = 0
+    while k < steps:
+        t = t_img + dt * k
+        if (t >= t_event) if at_or_after else not (t < t_event):
+            return k
+        if k == 0:  # the last step: if it is before the event, so are all
+            t = t_img + dt * (steps - 1)
+            if not ((t >= t_event) if at_or_after else not (t < t_event)):
+                return steps
+        k += 1
+    return steps
+
+
+@njit(inline="always", **_JIT)
+def _opens(rr, oo, qq, closing, open2):
+    """The hard switch's opening test multiplied out (``guidance.impactor.los._hard_switch``):
+    |omega| >= omega_open iff rho^2 > rho_o^2 and (opening range or |rho x rho_dot|^2
+    (rho^2 - rho_o^2) >= rho_o^2 (rho . rho_dot)^2); ``open2`` = rho_o^2."""
+    return rr > open2 and (not closing or oo * (rr - open2) >= open2 * qq)
+
+
+@njit(inline="always", **_JIT)
+def _floor_bounds(vv, close2, open2):
+    """``(1 / vv, whether the switching test may bound the floor a / vv by a (1 / vv))``: where
+    1 / vv and both tolerances are normal numbers (rounding then errs by 3 ulp at most)."""
+    inv_vv = 1.0 / vv
+    ok = 2.3e-308 <= inv_vv < 1e300 and 2.3e-308 <= close2 < 1e300 and 2.3e-308 <= open2 < 1e300
+    return inv_vv, ok
 
 
 @njit(**_JIT)
@@ -528,7 +613,6 @@ def _run(
     ab0, ab1, ab2 = prm[SIG_ATT_BIAS] * w[9], prm[SIG_ATT_BIAS] * w[10], prm[SIG_ATT_BIAS] * w[11]
     ba0, ba1, ba2 = acc_sig * w[12], acc_sig * w[13], acc_sig * w[14]
     p = p0.copy()
-    g = np.empty((4, 6))  # the filter update's u and w rows
 
     engine_on = 0.0
     sigma_b = _plan(prm, c_bi, p, 0.0, rh0, rh1, rh2, vh0, vh1, vh2)
@@ -547,7 +631,7 @@ def _run(
             w[:IMAGE_DRAWS] = images[i, :IMAGE_DRAWS]
         if do_images:
             rh0, rh1, rh2, vh0, vh1, vh2, err2 = _image_update(
-                prm, c_bi, p, w, x, y, z, rh0, rh1, rh2, vh0, vh1, vh2, ab0, ab1, ab2, g
+                prm, c_bi, p, w, x, y, z, rh0, rh1, rh2, vh0, vh1, vh2, ab0, ab1, ab2
             )
             los_error_sq += err2
             images_used += 1
@@ -557,6 +641,7 @@ def _run(
         close_nav, open_nav = k2sq * sb2, k1sq * sb2
         # Loop invariants while coasting, recomputed after each burn step (the same bits).
         vv = vh0 * vh0 + vh1 * vh1 + vh2 * vh2
+        inv_vv, bounds_ok = _floor_bounds(vv, close_nav, open_nav)
         dh0, dh1, dh2 = vh0 * dt, vh1 * dt, vh2 * dt
         dx, dy, dz = _coast_increment(vx, vy, vz, c6)
         # Execution draws of this interval's ignitions (fed: gnc_jax's burn-table row).
@@ -564,15 +649,17 @@ def _run(
         ignitions_image = 0
         mom_a = mom_b = mom_c = 0.0
         burn_image = 0.0
+        # The steps at which t = t_img + k dt reaches the cutoff and the retarget time.
+        k_cut = _first_step(t_img, dt, steps, cutoff, False)
+        k_ret = _first_step(t_img, dt, steps, retarget, True)
         for k in range(steps if do_steps else 0):
-            t = t_img + dt * k
             throttle = 0.0
-            if t < cutoff:
+            if k < k_cut:
                 # The hard switch multiplied out (guidance.impactor.los._hard_switch):
                 # |omega| >= omega_open iff rho^2 > rho_o^2 and (opening range or
                 # |rho x rho_dot|^2 (rho^2 - rho_o^2) >= rho_o^2 (rho . rho_dot)^2); likewise
                 # for closing at rho_c.
-                if t >= retarget:
+                if k >= k_ret:
                     q0, q1, q2 = af0 - rh0, af1 - rh1, af2 - rh2  # rho; rho_dot = -v_hat
                 else:
                     q0, q1, q2 = ai0 - rh0, ai1 - rh1, ai2 - rh2
@@ -580,18 +667,33 @@ def _run(
                 qv = -(q0 * vh0 + q1 * vh1 + q2 * vh2)  # rho . rho_dot
                 o0, o1, o2 = q1 * vh2 - q2 * vh1, q2 * vh0 - q0 * vh2, q0 * vh1 - q1 * vh0
                 oo = o0 * o0 + o1 * o1 + o2 * o2  # |rho x rho_dot|^2
-                close2 = max(close_nav, c_res2 * rr / vv)  # the one-step floor (miss_limits)
-                open2 = max(open_nav, close2)
+                a_floor = c_res2 * rr  # the one-step floor (miss_limits): a_floor / vv
                 qq = qv * qv
                 closing = qv < 0.0
-                if rr > open2 and (not closing or oo * (rr - open2) >= open2 * qq):
-                    engine_on = 1.0
-                elif (
-                    rr <= close2
-                    or (closing and oo * (rr - close2) <= close2 * qq)
-                    or (not closing and oo == 0.0 and qv == 0.0)
-                ):
-                    engine_on = 0.0
+                # The engine off stays off unless the opening test passes, and that test only
+                # gets harder as rho_o^2 grows: where it fails at a lower bound of rho_o^2 the
+                # floor's division is not needed (a_floor / vv rounded is within a_floor *
+                # (1 / vv) (1 +- 2^-50) where both are normal numbers).
+                a_lo = a_floor * inv_vv
+                if not (
+                    engine_on == 0.0
+                    and bounds_ok
+                    and 2.3e-308 <= a_lo < 1e300
+                    and not _opens(
+                        rr, oo, qq, closing,
+                        max(open_nav, max(close_nav, a_lo * (1.0 - 2.0**-50))),
+                    )
+                ):  # fmt: skip
+                    close2 = max(close_nav, a_floor / vv)
+                    open2 = max(open_nav, close2)
+                    if _opens(rr, oo, qq, closing, open2):
+                        engine_on = 1.0
+                    elif (
+                        rr <= close2
+                        or (closing and oo * (rr - close2) <= close2 * qq)
+                        or (not closing and oo == 0.0 and qv == 0.0)
+                    ):
+                        engine_on = 0.0
                 throttle = engine_on
             else:
                 engine_on = 0.0
@@ -636,6 +738,7 @@ def _run(
                 rh2 = rh2 + vh2 * dt + dm2 * (0.5 * dt)
                 vh0, vh1, vh2 = vh0 + dm0, vh1 + dm1, vh2 + dm2
                 vv = vh0 * vh0 + vh1 * vh1 + vh2 * vh2
+                inv_vv, bounds_ok = _floor_bounds(vv, close_nav, open_nav)
                 dh0, dh1, dh2 = vh0 * dt, vh1 * dt, vh2 * dt
                 dx, dy, dz = _coast_increment(vx, vy, vz, c6)
                 th2 = throttle * throttle
