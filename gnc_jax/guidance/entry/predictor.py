@@ -236,10 +236,7 @@ def second_entry_cos(law, speed, model):
 
 def predicted_cos_bank(law, second, sigma_0, v_0, speed, model):
     """Cosine of the bank the prediction flies: the first-entry profile's, or the second
-    entry's after a skip without a Kepler phase (``second``)."""
-    if law.second_entry_bank == "reference":  # (the cosine of one bank)
-        bank = jnp.where(second, law.reference.bank_at(speed), profile(law, sigma_0, v_0, speed))
-        return jnp.cos(bank)
+    entry's after a skip without a Kepler phase or flown on from the switch (``second``)."""
     first = jnp.cos(profile(law, sigma_0, v_0, speed))
     return jnp.where(second, second_entry_cos(law, speed, model), first)
 
@@ -280,7 +277,7 @@ def predictor_step(law, c: _PredictorState, sigma_0, v_0, model) -> _PredictorSt
     crest = ~kepler & skip_switch(law, pulled, hdot1, ng1, speed1)
     second = c.second | jnp.where(by_speed, on_speed, crest)
     switch_step = c.switch_step
-    if not flies_to_switch(law):  # fly on from the switch point with the reference's bank
+    if not flies_to_switch(law):  # fly on from the switch point with the second entry's bank
         before, now, t_sw, dt_sw, passed, flies_on = switch_step
         now1 = _Point(y1, alt1, hdot1, ng1, speed1)
         # the first switch point of a prediction started after the pull-up (a skip flown on
