@@ -324,7 +324,8 @@ class SkipEntryParameters(AbstractEntryGuidance):
         "chute crossrange judged there jumps with the prediction's kind near the corridor's "
         "edge and made the bank reverse every few seconds (L/D 0.40, -5.2 deg / 8000 km: 5 "
         "skip-outs in 200 runs against 1). Flying on takes 1.36 times the predictor's steps "
-        "on the paper scenario; see the design decisions",
+        "on the paper scenario (its 1000-run study 15-18 % more time); see the design "
+        "decisions",
     )
     second_entry_bank: str = param(
         "tracked",
