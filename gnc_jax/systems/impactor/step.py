@@ -186,7 +186,7 @@ def begin_interval(
     rotation = _inline if sim.reverse_mode else computed_once
 
     def draws_and_attitudes(r_hat):
-        w = image_draws(key, i)
+        w = rotation(lambda: image_draws(key, i), t)
         entries = lambda theta: rotation(small_rotation_entries, t, theta)  # noqa: E731
         return w, camera_attitudes(sim, r_hat, bias, w, draws.misalignment, entries)
 
