@@ -64,13 +64,16 @@ def test_platform_defaults_and_override():
     assert not for_platform("gpu").fence and for_platform("gpu").unroll > 1
     assert not for_platform("gpu").early_exit and for_platform("cpu").early_exit
     assert for_platform("gpu") == ACCELERATOR
-    # a system may declare its own accelerator layout; the CPU's stays the platform's
+    # a system may declare its own accelerator layout (the intercept's CPU one is the platform's)
     intercept = gj.get_system("intercept")
     assert for_platform("gpu", intercept) == LoopShape(
         fence=False, unroll=8, early_exit=False, components=True
     )
     assert for_platform("gpu", gj.get_system("impactor")) == for_platform("gpu")
     assert for_platform("cpu", intercept) == for_platform("cpu")
+    # and its own CPU layout: the impactor unrolls its control steps, fenced as the CPU's
+    impactor_cpu = for_platform("cpu", gj.get_system("impactor"))
+    assert impactor_cpu.unroll > 1 and impactor_cpu._replace(unroll=1) == for_platform("cpu")
     assert loop_shape() == for_platform("cpu")  # CI's backend
     with using_loop_shape(ACCELERATOR):
         assert loop_shape() == ACCELERATOR

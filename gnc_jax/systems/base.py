@@ -144,6 +144,7 @@ class AbstractSystem(abc.ABC):
         accelerator_loop_shape: the :class:`~gnc_jax._numerics.LoopShape` this system's loops
             take on a GPU, where it was measured to beat the accelerators' default; ``None``:
             the default.
+        cpu_loop_shape: likewise on the CPU.
     """
 
     name: ClassVar[str]
@@ -168,6 +169,7 @@ class AbstractSystem(abc.ABC):
     source_groups: ClassVar[dict[str, tuple[str, ...]]] = {}
     budget_metrics: ClassVar[dict[str, Any]] = {}
     accelerator_loop_shape: ClassVar[Any] = None
+    cpu_loop_shape: ClassVar[Any] = None
 
     # ---- cost ----
     def steps_per_run(self, config: dict) -> float | None:

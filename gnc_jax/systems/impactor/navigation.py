@@ -41,7 +41,12 @@ def attitude_bias_covariance(r, v, sigma_bias_rad) -> Float[Array, "6 6"]:
 
 
 def camera_attitudes(
-    sim: ImpactorSimulation, r_hat: Vector3, attitude_bias_rad, w, misalignment_rad=None
+    sim: ImpactorSimulation,
+    r_hat: Vector3,
+    attitude_bias_rad,
+    w,
+    misalignment_rad=None,
+    rotation_entries=small_rotation_entries,
 ) -> tuple:
     """``(c_true, c_est)``, each the three rows of a camera attitude C_cI: the camera pointed
     at the estimated target direction with attitude-control error (``w[2:5]``) and rotated by
@@ -50,15 +55,18 @@ def camera_attitudes(
     not know the misalignment).
 
     The attitude errors' rotations come from power series (``small_rotation_entries``: no
-    trigonometry), composed row by row.
+    trigonometry), composed row by row. ``rotation_entries``: how a rotation's entries are
+    computed (a batched caller computes them once into memory with
+    :func:`~gnc_jax._numerics.computed_once`: left to fusion, both series are recomputed for
+    every component of every row of both attitudes).
     """
     err = sim.errors
     cmd = camera_axes(-r_hat, sim.context.c_bi[2])
-    c_true = rotate_rows(small_rotation_entries(err.attitude_control_rad * w[2:5]), cmd)
+    c_true = rotate_rows(rotation_entries(err.attitude_control_rad * w[2:5]), cmd)
     knowledge = attitude_bias_rad + err.attitude_noise_rad * w[5:8]
-    c_est = rotate_rows(small_rotation_entries(knowledge), c_true)
+    c_est = rotate_rows(rotation_entries(knowledge), c_true)
     if misalignment_rad is not None:
-        c_true = rotate_rows(small_rotation_entries(misalignment_rad), c_true)
+        c_true = rotate_rows(rotation_entries(misalignment_rad), c_true)
     return c_true, c_est
 
 

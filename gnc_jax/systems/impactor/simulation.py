@@ -28,7 +28,13 @@ from ...guidance.impactor.base import AbstractImpactorGuidance
 from ...navigation.ekf import navigation_lost
 from ...navigation.packed_ekf import pack
 from ..loop import LoopState, closed_loop, flatten_trace, with_status
-from .draws import ImpactorDraws, burn_draws, camera_misalignment, initial_conditions
+from .draws import (
+    ImpactorDraws,
+    burn_draws,
+    camera_misalignment,
+    image_stream,
+    initial_conditions,
+)
 from .state import (
     EngineMemory,
     Estimate,
@@ -77,7 +83,7 @@ def start(
         ),
     )
     misalignment = camera_misalignment(sim, key) if sim.camera_misaligned else None
-    return state, ImpactorDraws(dispersion, burns, misalignment)
+    return state, ImpactorDraws(dispersion, burns, misalignment, image_stream(key))
 
 
 def run(

@@ -16,6 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..._numerics import LoopShape
 from ..._status import Status
 from ...geometry.ellipse import ellipse_probability
 from ...guidance.impactor.base import AbstractImpactorGuidance
@@ -255,6 +256,9 @@ class ImpactorSystem(AbstractSystem):
     # per-operation overhead of its ~40 kernels per step, above ~2000 its working set
     # outgrows the 1 MB L2 cache).
     chunk_per_device: ClassVar[int] = 2048
+    # The 15 control steps of an image interval unrolled 5 times per scan trip: measured 5 %
+    # faster on the CPU (deep-impact-los, 2,000 runs on 2 cores), outcomes equal to the last bit.
+    cpu_loop_shape: ClassVar[Any] = LoopShape(fence=True, unroll=5, early_exit=True)
     # GPU: deep-impact-los on one H100 (unfenced loops, scans unrolled 4 times) took 0.14 s for
     # 1,024 runs, 0.48 s per chunk of 125,000 and 0.98 s per chunk of 250,000: ~17 us per
     # sequential step plus 0.46 ns per run-step.
