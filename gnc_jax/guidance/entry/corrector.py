@@ -20,6 +20,7 @@ from .predictor import (
     predictor_start,
     predictor_step,
     profile,
+    to_switch,
 )
 from .state import SkipEntryState
 
@@ -117,9 +118,9 @@ def correct(
     by all predictions of the cycle, its ``slope`` this cycle's.
 
     With ``predictor_horizon = "chute_crossrange"`` the predictions end at the switch point
-    (their range error is its) and only the solution flies on to the chute, from its loop
-    state there, in the rounds after the solve: the same flight as flying every prediction
-    on, at one flight on per cycle.
+    (their range error is its) and only the solution flies on, after the solve, from its
+    loop state there to the chute: the same flight as flying every prediction on, at one
+    flight on per cycle.
 
     The predictions of the whole cycle are one loop over predictor steps, in rounds of
     ``ROUND_STEPS``: after each round, a run whose prediction has ended gives its range
@@ -159,46 +160,38 @@ def correct(
     s = solver.init(sigma_prev, aux0, z)
     x, active = solver.propose(s)
     c = predictor_start(law, origin, x, active, model)
+    live = lambda c: to_switch(law, c)  # noqa: E731
 
     def round_(carry):
         s, x, c = carry
-        solved = solver.done(s)  # where only the solution flies on: flying it on
-
-        def live(c):  # the prediction integrates (pausing at its switch point, but the solution)
-            return (
-                integrating(law, c) & (solved | ~c.switch_step[4]) if once else integrating(law, c)
-            )
-
         c = _steps(law, c, x, origin.speed_mps, model, live, loop_kind)
-        end = ~live(c) & ~solved
+        end = ~live(c)
         p = finished_prediction(law, c, y, t, model, target_fixed)
         aux = (p.crossrange_m, c) if once else p.crossrange_m
         s = _where(end, solver.absorb(s, x, p.miss_m, aux, p.steps.astype(float)), s)
         x_next, active = solver.propose(s)
         c_next = predictor_start(law, origin, x_next, active, model)
-        if once:  # the solve ended: its solution flies on from where its prediction paused
-            best = solver.result(s)
-            now = solver.done(s)
-            x_next = jnp.where(now, best.x, x_next)
-            c_next = _where(now, best.aux[1], c_next)
         return s, jnp.where(end, x_next, x), _where(end, c_next, c)
 
-    # each prediction ends within ceil(max_steps / ROUND_STEPS) rounds, as does a flight on
+    # each prediction ends within ceil(max_steps / ROUND_STEPS) rounds
     rounds = -(-law.predictor_max_steps // ROUND_STEPS)
-    trips = (solver.n_evals_total + once) * rounds
-
-    def looping(sxc):
-        unsolved = ~solver.done(sxc[0])
-        return unsolved | integrating(law, sxc[2]) if once else unsolved
-
-    s, _, c = _loop(looping, round_, (s, x, c), trips, loop_kind)
+    unsolved = lambda sxc: ~solver.done(sxc[0])  # noqa: E731
+    s, _, _ = _loop(unsolved, round_, (s, x, c), solver.n_evals_total * rounds, loop_kind)
     res = solver.result(s)
     if not once:
         return res
-    chi, paused = res.aux
-    flown = paused.switch_step[4]  # the solution passed its switch point and flew on
-    chi = jnp.where(flown, finished_prediction(law, c, y, t, model, target_fixed).crossrange_m, chi)
-    return res._replace(aux=chi, cost=res.cost + (c.k - paused.k).astype(float))
+    # the solution flies on from its switch point to the chute for the crossrange there
+    _, c = res.aux
+    on = lambda c: integrating(law, c)  # noqa: E731
+    c_end = _loop(
+        on,
+        lambda c: _steps(law, c, res.x, origin.speed_mps, model, on, loop_kind),
+        c,
+        rounds,
+        loop_kind,
+    )
+    p = finished_prediction(law, c_end, y, t, model, target_fixed)
+    return res._replace(aux=p.crossrange_m, cost=res.cost + (c_end.k - c.k).astype(float))
 
 
 def _steps(law, c, sigma_0, v_0, model, live, loop_kind):
