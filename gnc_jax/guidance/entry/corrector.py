@@ -14,13 +14,11 @@ from ...root_finding import RegulaFalsiResult, regula_falsi
 from .phases import is_direct
 from .predictor import (
     finished_prediction,
-    flies_on_once,
     integrating,
     prediction_origin,
     predictor_start,
     predictor_step,
     profile,
-    to_switch,
 )
 from .state import SkipEntryState
 
@@ -113,14 +111,9 @@ def correct(
     Warm-started at the previous solution; with ``corrector_start = "secant"`` and the
     previous cycle's ``slope`` (m/rad), a miss of the warm start is followed by the secant
     step on that slope instead of the Δσ step of eq. 15. The result's ``aux`` is the
-    predicted crossrange at the end point of the solution's prediction (the switch point's,
-    or the chute's where it flies on), its ``cost`` the number of predictor RK4 steps taken
-    by all predictions of the cycle, its ``slope`` this cycle's.
-
-    With ``predictor_horizon = "chute_crossrange"`` the predictions end at the switch point
-    (their range error is its) and only the solution flies on, after the solve, from its
-    loop state there to the chute: the same flight as flying every prediction on, at one
-    flight on per cycle.
+    predicted crossrange at the switch point of the solution, its ``cost`` the number of
+    predictor RK4 steps taken by all predictions of the cycle, its ``slope`` this
+    cycle's.
 
     The predictions of the whole cycle are one loop over predictor steps, in rounds of
     ``ROUND_STEPS``: after each round, a run whose prediction has ended gives its range
@@ -153,78 +146,61 @@ def correct(
         anderson_bjorck=secant,
     )
     origin = prediction_origin(law, y, t, pulled_up, model, dip_altitude_m)
-    once = flies_on_once(law)
     z = jnp.zeros(())
-    # the solution's loop state rides with its crossrange where only it flies on
-    aux0 = (z, predictor_start(law, origin, sigma_prev, False, model)) if once else z
-    s = solver.init(sigma_prev, aux0, z)
+    s = solver.init(sigma_prev, z, z)
     x, active = solver.propose(s)
-    c = predictor_start(law, origin, x, active, model)
-    live = lambda c: to_switch(law, c)  # noqa: E731
+
+    def steps(c, sigma_0):
+        """Up to ROUND_STEPS steps of the prediction."""
+        fixed = not loop_shape().early_exit  # a GPU's layout: no predicate read back per step
+        if loop_kind in ("checkpointed", "fixed") or fixed:
+
+            def masked(c, _):
+                new = predictor_step(law, c, sigma_0, origin.speed_mps, model)
+                return _where(integrating(law, c), new, c), None
+
+            # Fixed, a round is unrolled whole: a loop inside the rounds' loop makes XLA copy
+            # every carried array of a round (the vmapped rounds keep the finished runs' state).
+            unroll = ROUND_STEPS if fixed else 1
+            return jax.lax.scan(masked, c, None, length=ROUND_STEPS, unroll=unroll)[0]
+        c, _ = jax.lax.while_loop(
+            lambda cj: integrating(law, cj[0]) & (cj[1] < ROUND_STEPS),
+            lambda cj: (
+                predictor_step(law, cj[0], sigma_0, origin.speed_mps, model),
+                cj[1] + 1,
+            ),
+            (c, jnp.asarray(0, jnp.int32)),
+        )
+        return c
 
     def round_(carry):
         s, x, c = carry
-        c = _steps(law, c, x, origin.speed_mps, model, live, loop_kind)
-        end = ~live(c)
+        c = steps(c, x)
+        end = ~integrating(law, c)
         p = finished_prediction(law, c, y, t, model, target_fixed)
-        aux = (p.crossrange_m, c) if once else p.crossrange_m
-        s = _where(end, solver.absorb(s, x, p.miss_m, aux, p.steps.astype(float)), s)
+        s = _where(end, solver.absorb(s, x, p.miss_m, p.crossrange_m, p.steps.astype(float)), s)
         x_next, active = solver.propose(s)
         c_next = predictor_start(law, origin, x_next, active, model)
         return s, jnp.where(end, x_next, x), _where(end, c_next, c)
 
+    c = predictor_start(law, origin, x, active, model)
     # each prediction ends within ceil(max_steps / ROUND_STEPS) rounds
-    rounds = -(-law.predictor_max_steps // ROUND_STEPS)
-    unsolved = lambda sxc: ~solver.done(sxc[0])  # noqa: E731
-    s, _, _ = _loop(unsolved, round_, (s, x, c), solver.n_evals_total * rounds, loop_kind)
-    res = solver.result(s)
-    if not once:
-        return res
-    # the solution flies on from its switch point to the chute for the crossrange there
-    _, c = res.aux
-    on = lambda c: integrating(law, c)  # noqa: E731
-    c_end = _loop(
-        on,
-        lambda c: _steps(law, c, res.x, origin.speed_mps, model, on, loop_kind),
-        c,
-        rounds,
-        loop_kind,
-    )
-    p = finished_prediction(law, c_end, y, t, model, target_fixed)
-    return res._replace(aux=p.crossrange_m, cost=res.cost + (c_end.k - c.k).astype(float))
+    most = solver.n_evals_total * -(-law.predictor_max_steps // ROUND_STEPS)
+    if loop_kind == "fixed":  # every round runs, a solved run's carry held: no predicate
 
+        def masked_round(sxc, _):
+            return _where(solver.done(sxc[0]), sxc, round_(sxc)), None
 
-def _steps(law, c, sigma_0, v_0, model, live, loop_kind):
-    """Up to ROUND_STEPS predictor steps while ``live(c)``."""
-    fixed = not loop_shape().early_exit  # a GPU's layout: no predicate read back per step
-    if loop_kind in ("checkpointed", "fixed") or fixed:
-
-        def masked(c, _):
-            return _where(live(c), predictor_step(law, c, sigma_0, v_0, model), c), None
-
-        # Fixed, a round is unrolled whole: a loop inside the rounds' loop makes XLA copy
-        # every carried array of a round (the vmapped rounds keep the finished runs' state).
-        unroll = ROUND_STEPS if fixed else 1
-        return jax.lax.scan(masked, c, None, length=ROUND_STEPS, unroll=unroll)[0]
-    c, _ = jax.lax.while_loop(
-        lambda cj: live(cj[0]) & (cj[1] < ROUND_STEPS),
-        lambda cj: (predictor_step(law, cj[0], sigma_0, v_0, model), cj[1] + 1),
-        (c, jnp.asarray(0, jnp.int32)),
-    )
-    return c
-
-
-def _loop(live, body, carry, max_trips, loop_kind):
-    """``body`` while ``live``, at most ``max_trips`` times, as ``loop_kind`` says (see
-    :func:`correct`): ``"fixed"`` runs every trip and holds a finished carry."""
-    if loop_kind == "fixed":
-
-        def masked(carry, _):
-            return _where(live(carry), body(carry), carry), None
-
-        return jax.lax.scan(masked, carry, None, length=max_trips)[0]
-    if loop_kind == "checkpointed":
-        return eqxi.while_loop(
-            live, body, carry, max_steps=max_trips, kind="checkpointed", checkpoints=CHECKPOINTS
+        s, _, _ = jax.lax.scan(masked_round, (s, x, c), None, length=most)[0]
+    elif loop_kind == "checkpointed":
+        s, _, _ = eqxi.while_loop(
+            lambda sxc: ~solver.done(sxc[0]),
+            round_,
+            (s, x, c),
+            max_steps=most,
+            kind="checkpointed",
+            checkpoints=CHECKPOINTS,
         )
-    return jax.lax.while_loop(live, body, carry)
+    else:
+        s, _, _ = jax.lax.while_loop(lambda sxc: ~solver.done(sxc[0]), round_, (s, x, c))
+    return solver.result(s)

@@ -223,23 +223,6 @@ def integrating(law, c: _PredictorState):
     return (c.kind < 0) & (c.k < law.predictor_max_steps)
 
 
-def flies_on_once(law) -> bool:
-    """Whether only the solution of a corrector cycle flies on from the switch point
-    (``predictor_horizon = "chute_crossrange"``, static): its range error is the switch
-    point's, and the chute's crossrange is the solution's alone; with ``"chute"`` every
-    prediction's range error is the chute's, so every prediction flies on."""
-    return law.predictor_horizon == "chute_crossrange" and not flies_to_switch(law)
-
-
-def to_switch(law, c: _PredictorState):
-    """The prediction is integrating and, where only the solution flies on
-    (:func:`flies_on_once`), has not passed its switch point: a corrector cycle's
-    predictions end there, the solution's flight on resumes from this state."""
-    if not flies_on_once(law):
-        return integrating(law, c)
-    return integrating(law, c) & ~c.switch_step[4]
-
-
 def second_entry_cos(law, speed, model):
     """Cosine of the bank a prediction flies in the second entry: the reference's, or with
     ``second_entry_bank = "tracked"`` the tracking's command without feedback (eq. 6:
