@@ -61,7 +61,12 @@ def image_stream(key: PRNGKeyArray) -> PRNGKeyArray:
 
 def image_key(key: PRNGKeyArray, i) -> PRNGKeyArray:
     """The key of image ``i``'s stream."""
-    return fold_in(image_stream(key), i, indexed=True)
+    return image_key_in(image_stream(key), i)
+
+
+def image_key_in(stream: PRNGKeyArray, i) -> PRNGKeyArray:
+    """The key of image ``i``'s stream from the images' stream key (:func:`image_stream`)."""
+    return fold_in(stream, i, indexed=True)
 
 
 def image_normals(stream: PRNGKeyArray, i) -> Float[Array, "8"]:
@@ -73,7 +78,7 @@ def image_normals(stream: PRNGKeyArray, i) -> Float[Array, "8"]:
     time. The per-run draws (delivery, knowledge, biases), which set the dispersion, stay
     float64.
     """
-    w = normal(fold_in(stream, i, indexed=True), (IMAGE_DRAWS,), jnp.float32)
+    w = normal(image_key_in(stream, i), (IMAGE_DRAWS,), jnp.float32)
     return w.astype(jnp.float64)
 
 
@@ -143,6 +148,7 @@ __all__ = [
     "camera_misalignment",
     "image_draws",
     "image_key",
+    "image_key_in",
     "image_normals",
     "image_stream",
     "initial_conditions",

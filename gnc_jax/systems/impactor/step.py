@@ -16,7 +16,7 @@ from ...navigation.camera import small_rotation_entries
 from ...navigation.ekf import NIS_BOUND_2DOF, NavEstimate
 from ...navigation.packed_ekf import apply_gain, propagate_packed
 from ..loop import LoopState
-from .draws import N_BURN_INTERVALS, ImpactorDraws, image_normals
+from .draws import N_BURN_INTERVALS, ImpactorDraws, image_key_in, image_normals
 from .navigation import accel_noise, camera_attitudes, image_update
 from .state import Estimate, ImpactorSimulation, StepRecord
 
@@ -194,9 +194,7 @@ def begin_interval(
         draws_and_attitudes, t, estimate.r_hat, adjoint=_adjoint(sim, "save")
     )
     gain, meas = computed_once(
-        lambda *a: image_update(
-            sim, *a, w[:2], fold_in(fold_in(draws.image_stream, i, indexed=True), 1)
-        ),
+        lambda *a: image_update(sim, *a, w[:2], fold_in(image_key_in(draws.image_stream, i), 1)),
         t,
         estimate.r_hat,
         estimate.v_hat,
