@@ -103,9 +103,7 @@ def run(
     steps are checkpointed inside it (:func:`~.step.image_step`), so that recomputation keeps
     one loop state per control step. Without differentiation the checkpoints are inlined: the
     evaluation is unchanged."""
-    step = jax.checkpoint(
-        functools.partial(image_step, sim, law, key, draws, record), prevent_cse=False
-    )
+    step = jax.checkpoint(functools.partial(image_step, sim, law, draws, record), prevent_cse=False)
     state, rec = jax.lax.scan(step, state, jnp.arange(sim.n_images))
     return state, flatten_trace(rec)
 

@@ -131,15 +131,13 @@ def control_step(sim: ImpactorSimulation, law, accel_bias, record, state: LoopSt
     return new, rec
 
 
-def image_step(
-    sim: ImpactorSimulation, law, key, draws: ImpactorDraws, record, state: LoopState, i
-):
+def image_step(sim: ImpactorSimulation, law, draws: ImpactorDraws, record, state: LoopState, i):
     """One image interval: image -> EKF update -> guidance ``plan`` (:func:`begin_interval`) ->
     control steps -> accelerometer noise -> covariance propagation (:func:`end_interval`)."""
     dt = sim.context.dt_s
     n = sim.steps_per_image
     t = i * sim.context.image_interval_s
-    state, row = begin_interval(sim, law, key, draws, state, i, t)
+    state, row = begin_interval(sim, law, draws, state, i, t)
     k = jnp.arange(n)
     inputs = (t + dt * k, dt * (n - k - 0.5))
     # The truth state crosses the control steps as components (V3): its RK4 step then fuses
@@ -163,7 +161,7 @@ def image_step(
 
 
 def begin_interval(
-    sim: ImpactorSimulation, law, key, draws: ImpactorDraws, state: LoopState, i, t
+    sim: ImpactorSimulation, law, draws: ImpactorDraws, state: LoopState, i, t
 ) -> tuple[LoopState, Array]:
     """Image ``i`` at time ``t``: the EKF update, the law's ``plan``, the interval's
     accumulators reset and its row of the burn table (returned: its accelerometer normals are
