@@ -1,10 +1,10 @@
-"""A gain schedule (16 knots for the LOS law) tuned three ways on the same runs per step: Adam on
+"""A gain schedule (16 knots for the LOS law by default) tuned three ways on the same runs per step: Adam on
 reverse-mode gradients through the relaxed switch, the package's antithetic ES and CMA-ES
 (the ``cma`` package) on the hard logic.
 
     python benchmarks/tune_schedule.py [--batch 64] [--steps 30] [--heldout 2000]
         [--eval-every 2] [--eval-runs 256] [--methods adam,es,cma] [--population 4]
-        [--check-runs 256] [--setup los|skip-entry]
+        [--check-runs 256] [--setup los|skip-entry] [--breakpoints 0,120,...]
 
 ``deep-impact-los`` with k1 and k2 scheduled over time to go at 8 breakpoints each (16
 knots), starting from the packaged constant gains (4, 1) at every knot (the same flight as
@@ -54,8 +54,11 @@ def main():
     ap.add_argument("--population", type=int, default=4)
     ap.add_argument("--check-runs", type=int, default=256)
     ap.add_argument("--setup", choices=tuple(SETUPS), default="los")
+    ap.add_argument("--breakpoints", help="the schedule's breakpoints, comma-separated")
     args = ap.parse_args()
     name, field, breakpoints, params, objective = SETUPS[args.setup]
+    if args.breakpoints:
+        breakpoints = [float(b) for b in args.breakpoints.split(",")]
     scenario = gj.load_scenario(name, overrides={field: breakpoints})
     results = {}
     for method in args.methods.split(","):
