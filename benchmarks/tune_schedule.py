@@ -1,6 +1,6 @@
-"""A gain schedule (16 knots for the LOS law by default) tuned three ways on the same runs per step: Adam on
-reverse-mode gradients through the relaxed switch, the package's antithetic ES and CMA-ES
-(the ``cma`` package) on the hard logic.
+"""A gain schedule (16 knots for the LOS law by default) tuned three ways on the same runs per
+step: Adam on reverse-mode gradients through the relaxed switch, the package's antithetic ES
+and CMA-ES (the ``cma`` package) on the hard logic.
 
     python benchmarks/tune_schedule.py [--batch 64] [--steps 30] [--heldout 2000]
         [--eval-every 2] [--eval-runs 256] [--methods adam,es,cma] [--population 4]
