@@ -49,6 +49,12 @@ class AbstractImpactorGuidance(AbstractGuidanceLaw):
     """Family base of the impactor terminal-guidance laws: ``nav`` is the filter's
     :class:`~gnc_jax.navigation.ekf.NavEstimate`, ``ctx`` an :class:`ImpactorGuidanceContext`,
     ``plan`` runs after each image's filter update, ``step`` returns an
-    :class:`EngineCommand`."""
+    :class:`EngineCommand`.
+
+    ``nav_by_component``: the law's ``step`` reads ``nav.r`` and ``nav.v`` through the
+    component helpers of :mod:`gnc_jax._numerics` (``sub3``, ``dot3``, ``norm3``, ...), so
+    that a loop may hand it the estimate's mean as :class:`~gnc_jax._numerics.V3`
+    components (the impactor's reverse-mode control steps do)."""
 
     laws: ClassVar[dict[str, type]] = {}
+    nav_by_component: ClassVar[bool] = False

@@ -149,6 +149,7 @@ class LOSSwitchingCurveGuidance(AbstractImpactorGuidance):
     relaxed: bool = eqx.field(static=True, default=False)
 
     ordered_gains = (("k1", "k2"),)
+    nav_by_component = True
     schedules = {"k1_schedule": "k1", "k2_schedule": "k2"}  # schedule -> the gain it replaces
     schedule_breakpoints = "schedule_tgo_s"
 

@@ -16,6 +16,7 @@ from typing import NamedTuple
 import equinox as eqx
 import jax.numpy as jnp
 
+from ..._numerics import V3, as_array
 from ..._types import Array, Scalar, Vector3
 from ...dynamics.impactor import Engine, RelativeDynamics
 from ...guidance.impactor.base import ImpactorGuidanceContext
@@ -52,7 +53,7 @@ class ImpactorSimulation(eqx.Module):
             holds its own; these are kept for the report's frame figure).
         reverse_mode: the closed loop's fenced computations (``computed_once``) carry their
             own reverse-mode rules, which forward mode refuses (static; set by
-            ``ImpactorSystem.reverse_mode``). The values are the same either way.
+            ``ImpactorSystem.reverse_mode``). The values agree either way (to rounding).
     """
 
     r0_m: Vector3
@@ -95,9 +96,28 @@ class Estimate(NamedTuple):
     burn_time_image_s: Scalar  # burn time since the last image (covariance growth)
 
     @property
-    def nav(self) -> NavEstimate:
-        """The dense estimate (6-vector mean, 6x6 covariance) a law reads."""
+    def nav(self) -> "NavEstimate | ComponentNav":
+        """The estimate a law reads: the dense one (6-vector mean, 6x6 covariance), or, with
+        the mean carried by component, a :class:`ComponentNav` of the same values."""
+        if isinstance(self.r_hat, V3):
+            return ComponentNav(self.r_hat, self.v_hat, self.p)
         return NavEstimate(jnp.concatenate([self.r_hat, self.v_hat]), unpack(self.p))
+
+
+class ComponentNav(NamedTuple):
+    """The estimate as a law reads it where the loop carries the mean by component (reverse
+    mode's control steps, :func:`~.step.image_step`): ``r`` and ``v`` as
+    :class:`~gnc_jax._numerics.V3`, the covariance packed (a law reads its entries,
+    ``nav.p[i, j]``). The same values as the dense :class:`~gnc_jax.navigation.ekf.NavEstimate`."""
+
+    r: V3  # m
+    v: V3  # m/s
+    p: PackedCovariance
+
+    @property
+    def x(self) -> Array:
+        """The 6-vector mean (r, v)."""
+        return jnp.concatenate([as_array(self.r), as_array(self.v)])
 
 
 class EngineMemory(NamedTuple):
@@ -168,6 +188,7 @@ class StepRecord(NamedTuple):
 
 
 __all__ = [
+    "ComponentNav",
     "EngineMemory",
     "Estimate",
     "ImpactorOutcome",
