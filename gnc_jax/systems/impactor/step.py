@@ -177,14 +177,15 @@ def begin_interval(
     # front end's key is derived inside it, where XLA drops it when the front end draws
     # nothing (the Gaussian one). In reverse mode both keep their residuals from the forward
     # pass: recomputing them would draw their random numbers again (measured 10 % slower).
-    # Inside, the normals' random bits go to memory before their transformation (written
-    # out, the hash fused with the inverse error function into one slower kernel; measured
-    # about 5 % of the closed loop against jax's hash loop, the same numbers). Each attitude
-    # error's rotation entries go to memory too, and the two 16-term series they share before
-    # them: left to fusion, the series were recomputed for every component of every row of
-    # both attitudes, then for each of the nine entries (measured 17 % of the closed loop's
-    # elementwise operations, then about 3 % of its time). Reverse mode keeps this fence's
-    # residuals whole (no conditional inside it to transpose).
+    # Inside, the normals' random bits go to memory before their transformation: drawn from
+    # the written-out hash (no five-trip loop and its copies per image), which fused with the
+    # inverse error function makes one slower kernel (measured: jax's loop 1.00, written out
+    # and fused 1.03, written out and fenced 0.97 of the closed loop; the same numbers). Each
+    # attitude error's rotation entries go to memory too, and the two 16-term series they
+    # share before them: left to fusion, the series were recomputed for every component of
+    # every row of both attitudes (measured 17 % of the closed loop's elementwise
+    # operations), then for each of the nine entries (2-5 % of its time). Reverse mode keeps
+    # this fence's residuals whole (no conditional inside it to transpose).
     rotation = _inline if sim.reverse_mode else computed_once
 
     def entries(theta):
