@@ -12,8 +12,11 @@ per-source factor (0 turns a source off, and the derivative with respect to the 
 the run's linearised response to that source's draws).
 """
 
+import math
+
 import equinox as eqx
 import jax
+import jax.extend.random as jax_random
 import jax.numpy as jnp
 import numpy as np
 
@@ -113,12 +116,36 @@ def _routed(key: DrawKey, draw, shape):
     return jnp.where(key.from_b[src], xb, xa) * key.scale[src].astype(xa.dtype)
 
 
-def normal(key, shape=(), dtype=None) -> Float[Array, "..."]:
-    """Standard normal draws (``jax.random.normal``; routed for a :class:`DrawKey`)."""
+def normal(key, shape=(), dtype=None, bits_once=None) -> Float[Array, "..."]:
+    """Standard normal draws (``jax.random.normal``; routed for a :class:`DrawKey`).
+
+    ``bits_once``: for float32 draws, how their random bits are computed (``bits_once(fn)``
+    returns ``fn()``): a batched caller computes them once into memory
+    (:func:`~gnc_jax._numerics.computed_once`) apart from their transformation to normals,
+    which XLA otherwise fuses with a :func:`written_out` hash into one slower kernel. The
+    same numbers either way.
+    """
     kw = {} if dtype is None else {"dtype": dtype}
+    if bits_once is None:
+        draw = lambda k: jax.random.normal(k, shape, **kw)  # noqa: E731
+    elif dtype != jnp.float32:
+        raise ValueError(f"normal(bits_once=...) draws float32 only, not {dtype}")
+    else:
+        draw = lambda k: _normal32(bits_once(lambda: jax.random.bits(k, shape, jnp.uint32)))  # noqa: E731
     if not isinstance(key, DrawKey):
-        return jax.random.normal(key, shape, **kw)
-    return _routed(key, lambda k: jax.random.normal(k, shape, **kw), shape)
+        return draw(key)
+    return _routed(key, draw, shape)
+
+
+def _normal32(bits):
+    """``jax.random.normal``'s float32 normals of their 32-bit random ``bits``: the uniform
+    draw on (-1, 1) from the top 23 bits, then sqrt(2) erf^-1."""
+    one = np.float32(1.0)
+    mantissa = jax.lax.shift_right_logical(bits, np.uint32(32 - 23)) | one.view(np.uint32)
+    floats = jax.lax.bitcast_convert_type(mantissa, jnp.float32) - one
+    lo = np.nextafter(np.float32(-1.0), np.float32(0.0))
+    u = jax.lax.max(lo, floats * (one - lo) + lo)
+    return np.float32(np.sqrt(2.0)) * jax.lax.erf_inv(u)
 
 
 def uniform(key, shape=(), minval=0.0, maxval=1.0) -> Float[Array, "..."]:
@@ -129,6 +156,65 @@ def uniform(key, shape=(), minval=0.0, maxval=1.0) -> Float[Array, "..."]:
     centre = 0.5 * (minval + maxval)
     draw = lambda k: jax.random.uniform(k, shape, minval=minval, maxval=maxval) - centre  # noqa: E731
     return centre + _routed(key, draw, shape)
+
+
+_THREEFRY = jax_random.threefry_prng_impl
+_ROTATIONS = ((13, 15, 26, 6), (17, 29, 16, 24))
+
+
+def _threefry2x32(k1, k2, x1, x2):
+    """The Threefry-2x32 hash (20 rounds; Salmon et al. 2011) of the counts ``(x1, x2)`` under
+    the key ``(k1, k2)``, its rounds written out: the arithmetic of ``jax.random``'s own."""
+    ks = (k1, k2, k1 ^ k2 ^ np.uint32(0x1BD11BDA))
+    x0, x1 = x1 + ks[0], x2 + ks[1]
+    for n in range(5):
+        for r in _ROTATIONS[n % 2]:
+            x0 = x0 + x1
+            x1 = ((x1 << np.uint32(r)) | (x1 >> np.uint32(32 - r))) ^ x0
+        x0 = x0 + ks[(n + 1) % 3]
+        x1 = x1 + ks[(n + 2) % 3] + np.uint32(n + 1)
+    return x0, x1
+
+
+def _written_out_bits(key, bit_width, shape):
+    n = math.prod(shape)
+    if bit_width != 32 or n >= 2**32 or not jax.config.jax_threefry_partitionable:
+        return _THREEFRY.random_bits(key, bit_width, shape)
+    counts = jax.lax.iota(np.uint32, n).reshape(shape)
+    hi, lo = _threefry2x32(key[0], key[1], jnp.zeros_like(counts), counts)
+    return hi ^ lo
+
+
+def _written_out_fold_in(key, data):
+    data = jnp.asarray(data, jnp.uint32)
+    return jnp.stack(_threefry2x32(key[0], key[1], jnp.zeros_like(data), data))
+
+
+_WRITTEN_OUT = jax_random.define_prng_impl(
+    key_shape=_THREEFRY.key_shape,
+    seed=_THREEFRY.seed,
+    split=_THREEFRY.split,
+    random_bits=_written_out_bits,
+    fold_in=_written_out_fold_in,
+    name="threefry2x32_written_out",
+    tag="fry_w",
+)
+
+
+def written_out(key):
+    """``key`` (a threefry key, jax's default, or both keys of a :class:`DrawKey`) drawing the
+    same random numbers from the hash written out as elementwise operations.
+
+    Its fold-ins and 32-bit draws are jax's threefry bit for bit (other draws are jax's own).
+    On the CPU jax runs the hash as a loop of five trips, each a few kernels and copies of the
+    loop's state, for every draw; written out, XLA fuses a draw's hash into one kernel. Draw
+    its float32 normals with :func:`normal`'s ``bits_once`` (the hash and the inverse error
+    function fused into one kernel measured slower than jax's loop).
+    """
+    if isinstance(key, DrawKey):
+        a, b = written_out(key.a), written_out(key.b)
+        return DrawKey(a, b, key.from_b, key.scale, key.layout, key.path)
+    return jax.random.wrap_key_data(jax.random.key_data(key), impl=_WRITTEN_OUT)
 
 
 def stream_normal(key: PRNGKeyArray, stream: int, shape=(3,)) -> Float[Array, "..."]:
@@ -152,4 +238,5 @@ __all__ = [
     "stream_normal",
     "stream_uniform",
     "uniform",
+    "written_out",
 ]

@@ -64,7 +64,14 @@ def _horner(coefficients, x):
     return acc
 
 
-def small_rotation_entries(theta: Vector3) -> tuple:
+def rotation_series(theta: Vector3) -> tuple:
+    """``(sin(a)/a, (1 - cos a)/a^2)`` of the rotation vector ``theta`` (a = |theta|),
+    from the 16-term series in a^2 of :func:`small_rotation_entries`."""
+    a2 = theta[0] * theta[0] + theta[1] * theta[1] + theta[2] * theta[2]
+    return _horner(_SINC, a2), _horner(_COSC, a2)
+
+
+def small_rotation_entries(theta: Vector3, series=rotation_series) -> tuple:
     """The entries (row by row, a 3-tuple of 3-tuples of scalars) of :func:`small_rotation`,
     from power series in |theta|^2: R = cos(a) I + (sin(a)/a) [theta x] + ((1 - cos a)/a^2)
     theta theta^T, with sin(a)/a and (1 - cos a)/a^2 as 16-term series in a^2 = theta . theta.
@@ -75,12 +82,14 @@ def small_rotation_entries(theta: Vector3) -> tuple:
     formula, tested against scipy) for angles up to ``SERIES_ANGLE_MAX`` = pi; use it for
     attitude errors (the impactor's, at most 0.1 rad 1-sigma per axis, stay far below), and
     :func:`small_rotation` for arbitrary rotations.
+
+    ``series``: how the three series values are computed (:func:`rotation_series`; a batched
+    caller computes them once into memory with :func:`~gnc_jax._numerics.computed_once`: left
+    to fusion, each of the nine entries recomputes both series).
     """
     t = (theta[0], theta[1], theta[2])
-    a2 = t[0] * t[0] + t[1] * t[1] + t[2] * t[2]
-    s = _horner(_SINC, a2)
-    c = _horner(_COSC, a2)
-    d = 1.0 - c * a2  # cos(a)
+    s, c = series(theta)  # sin(a)/a, (1 - cos a)/a^2
+    d = 1.0 - c * (t[0] * t[0] + t[1] * t[1] + t[2] * t[2])  # cos(a)
     st = (s * t[0], s * t[1], s * t[2])
     return (
         (d + c * t[0] * t[0], c * t[0] * t[1] - st[2], c * t[0] * t[2] + st[1]),

@@ -12,7 +12,7 @@ from ..._numerics import as_array, as_arrays, as_components, computed_once, loop
 from ..._random import fold_in
 from ..._types import Array
 from ...dynamics.impactor import rk4, tilt_direction
-from ...navigation.camera import small_rotation_entries
+from ...navigation.camera import rotation_series, small_rotation_entries
 from ...navigation.ekf import NIS_BOUND_2DOF, NavEstimate
 from ...navigation.packed_ekf import apply_gain, propagate_packed
 from ..loop import LoopState
@@ -188,15 +188,24 @@ def begin_interval(
     # front end's key is derived inside it, where XLA drops it when the front end draws
     # nothing (the Gaussian one). In reverse mode both keep their residuals from the forward
     # pass: recomputing them would draw their random numbers again (measured 10 % slower).
-    # Inside, each attitude error's rotation entries go to memory too: left to fusion, their
-    # two 16-term series were recomputed for every component of every row of both attitudes
-    # (measured 17 % of the closed loop's elementwise operations). Reverse mode keeps this fence's
-    # residuals whole (no conditional inside it to transpose).
+    # Inside, the normals' random bits go to memory before their transformation: drawn from
+    # the written-out hash (no five-trip loop and its copies per image), which fused with the
+    # inverse error function makes one slower kernel (measured: jax's loop 1.00, written out
+    # and fused 1.03, written out and fenced 0.97 of the closed loop; the same numbers). Each
+    # attitude error's rotation entries go to memory too, and the two 16-term series they
+    # share before them: left to fusion, the series were recomputed for every component of
+    # every row of both attitudes (measured 17 % of the closed loop's elementwise
+    # operations), then for each of the nine entries (2-5 % of its time). Reverse mode keeps
+    # this fence's residuals whole (no conditional inside it to transpose).
     rotation = _inline if sim.reverse_mode else computed_once
 
+    def entries(theta):
+        series = lambda th: rotation(rotation_series, t, th)  # noqa: E731
+        return rotation(lambda th: small_rotation_entries(th, series), t, theta)
+
     def draws_and_attitudes(r_hat):
-        w = rotation(lambda: image_normals(draws.image_stream, i), t)
-        entries = lambda theta: rotation(small_rotation_entries, t, theta)  # noqa: E731
+        bits_once = lambda fn: rotation(fn, t)  # noqa: E731
+        w = rotation(lambda: image_normals(draws.image_stream, i, bits_once), t)
         return w, camera_attitudes(sim, r_hat, bias, w, draws.misalignment, entries)
 
     w, attitudes = computed_once(
