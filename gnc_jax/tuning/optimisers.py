@@ -12,12 +12,12 @@ capsule flies its cycles and its corrector's prediction rounds in equinox's chec
 memory). ``"auto"`` (the default) takes
 reverse mode from :data:`REVERSE_FROM` parameters on. Measured with
 ``benchmarks/tune_gradient.py --only impactor --modes value,forward,reverse --params
-4,8,12,16`` (deep-impact-los, 256 runs, one step, compile apart, the idle 2-core machine,
-wall time): value 0.17 s; forward mode 1.02 / 1.71 / 2.36 / 2.34 s for 4 / 8 / 12 / 16
-parameters (about 0.35 s + 0.17 s per parameter); reverse mode 1.61-1.99 s whatever the
-number (10-12x a value), peak RSS 2.0x the value's against 1.4x for forward mode. The
-crossover is at about 9 parameters: forward mode for a law's few gains, reverse mode for
-schedules.
+2,4,6,8`` (deep-impact-los, 256 runs, one step, compile apart, the shared 2-core machine at
+load 2-4, wall time): value 0.22 s; forward mode 0.60 / 0.89 / 0.98 / 1.24 s for 2 / 4 / 6 / 8
+parameters; reverse mode 0.91-1.29 s whatever the number, peak RSS 1.8-2.0x the value's against
+1.3-1.5x for forward mode: the LOS loop's crossover is at 6-8 parameters. The capsule's is
+higher, about 14: forward mode 6.7x a value for its 4 gains, reverse mode 20-21x (CPU time).
+Ten sits between the two: forward mode for a law's few gains, reverse mode for schedules.
 
 **Gradient-free baseline** (``method="es"``): an antithetic evolution strategy in the same
 ``theta`` with the same optimiser, evaluated with the hard logic; each generation flies
