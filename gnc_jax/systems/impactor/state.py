@@ -16,7 +16,7 @@ from typing import NamedTuple
 import equinox as eqx
 import jax.numpy as jnp
 
-from ..._numerics import V3, as_array
+from ..._numerics import V3
 from ..._types import Array, Scalar, Vector3
 from ...dynamics.impactor import Engine, RelativeDynamics
 from ...guidance.impactor.base import ImpactorGuidanceContext
@@ -113,11 +113,6 @@ class ComponentNav(NamedTuple):
     r: V3  # m
     v: V3  # m/s
     p: PackedCovariance
-
-    @property
-    def x(self) -> Array:
-        """The 6-vector mean (r, v)."""
-        return jnp.concatenate([as_array(self.r), as_array(self.v)])
 
 
 class EngineMemory(NamedTuple):
