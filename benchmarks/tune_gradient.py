@@ -68,7 +68,7 @@ def measure(system_name, mode, runs, short, n_params):
         to_theta, theta = (lambda p: p), theta0
 
     def f(p):
-        return problem.smooth(args, to_theta(p), temperature, idx, valid)
+        return problem.smooth(args, to_theta(p), temperature, idx, valid, mode)
 
     fn = {"value": f, "forward": jax.jacfwd(f), "reverse": jax.grad(f)}[mode]
     t0 = time.perf_counter()

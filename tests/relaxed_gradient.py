@@ -9,7 +9,8 @@ from gnc_jax import tuning
 
 
 def relaxed_objective(scenario: str, system: str, names: list[str], runs: int = 2):
-    """``(f, problem, theta)``: ``f(args, theta)`` is the relaxed objective of the gains
+    """``(f, problem, theta)``: ``f(args, theta, gradient="forward")`` is the relaxed objective
+    of the gains
     ``names`` (at the law's temperature) over the first ``runs`` runs of ``scenario`` with
     ``system``'s ``test_overrides``; ``theta`` the scenario's own gains in the tuner's units;
     ``problem.args`` and ``problem.args_for("reverse")`` its first argument in either mode."""
@@ -20,7 +21,7 @@ def relaxed_objective(scenario: str, system: str, names: list[str], runs: int = 
     theta = jnp.asarray(problem.param.theta([sc[n] for n in names]))
     idx, valid = problem.padded(np.arange(runs))
 
-    def f(args, th):
-        return problem.smooth(args, th, problem.law_temperature, idx, valid)
+    def f(args, th, gradient="forward"):
+        return problem.smooth(args, th, problem.law_temperature, idx, valid, gradient)
 
     return f, problem, theta

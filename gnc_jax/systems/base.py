@@ -299,6 +299,11 @@ class AbstractSystem(abc.ABC):
         (scans, each of whose steps the simulator checkpoints itself)."""
         return params
 
+    reverse_on_one_device: ClassVar[bool] = False
+    """Whether reverse mode runs a batch on one device instead of sharding it: equinox's
+    checkpointed ``while_loop`` cannot be differentiated inside ``shard_map`` (it checks its
+    carry against an example without the mesh's sharding and refuses the loop)."""
+
     # ---- results ----
     def statistics(self, outcomes: dict, ok) -> dict[str, Any]:
         """Summary statistics over the ``ok`` runs (``{}`` when there are none)."""

@@ -7,17 +7,18 @@ temperatures, hard-logic checks and progress records.
 the loops the system sets up for it (:meth:`~gnc_jax.systems.AbstractSystem.reverse_mode`):
 the impactor checkpoints each image step of its scan (one loop state kept per image, an
 image's control steps recomputed on the way back, each of them checkpointed in turn); the
-capsule flies its cycles and its corrector's prediction rounds in equinox's checkpointed
-``while_loop`` (the same trip counts and arithmetic as its ``lax.while_loop``, bounded
-memory). ``"auto"`` (the default) takes
+capsule flies its cycles in equinox's checkpointed ``while_loop`` (the same trip counts and
+arithmetic as its ``lax.while_loop``, bounded memory) and differentiates its corrector's
+solutions by the implicit function theorem. ``"auto"`` (the default) takes
 reverse mode from :data:`REVERSE_FROM` parameters on. Measured with
 ``benchmarks/tune_gradient.py --only impactor --modes value,forward,reverse --params
 2,4,6,8`` (deep-impact-los, 256 runs, one step, compile apart, the shared 2-core machine at
 load 2-4, wall time): value 0.22 s; forward mode 0.60 / 0.89 / 0.98 / 1.24 s for 2 / 4 / 6 / 8
 parameters; reverse mode 0.91-1.29 s whatever the number, peak RSS 1.8-2.0x the value's against
-1.3-1.5x for forward mode: the LOS loop's crossover is at 6-8 parameters. The capsule's is
-higher, about 14: forward mode 6.7x a value for its 4 gains, reverse mode 20-21x (CPU time).
-Ten sits between the two: forward mode for a law's few gains, reverse mode for schedules.
+1.3-1.5x for forward mode: the LOS loop's crossover is at 6-8 parameters. The capsule's is at
+or below its 4 gains: forward mode 6.7x a value for them, reverse mode 5.2-5.3x whatever the
+number (``--only capsule --modes value,reverse --params 2,16,32``, idle). Ten is above both:
+forward mode for a law's few gains, reverse mode for schedules.
 
 **Gradient-free baseline** (``method="es"``): an antithetic evolution strategy in the same
 ``theta`` with the same optimiser, evaluated with the hard logic; each generation flies
@@ -94,7 +95,7 @@ def _run_adam(
 ):  # fmt: skip
     def build_step():
         def value_and_grad(args, th, temperature, idx, valid):
-            f = lambda t: problem.smooth(args, t, temperature, idx, valid)  # noqa: E731
+            f = lambda t: problem.smooth(args, t, temperature, idx, valid, gradient)  # noqa: E731
             if gradient == "reverse":
                 return jax.value_and_grad(f)(th)
 

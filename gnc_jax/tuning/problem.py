@@ -64,6 +64,10 @@ class TuningProblem:
             )
             _check_fields(objective, outcome._fields, self.system.name)
         self.fn, self.n_dev = _batch_function(self.system, backend.devices if placed else None)
+        self.reverse_fn = self.fn
+        if self.system.reverse_on_one_device and self.n_dev > 1:
+            devices = backend.devices[:1] if placed else None
+            self.reverse_fn = batch_function(self.system, n_devices=1, devices=devices)[0]
         self.seed_arr = jnp.asarray(seed, dtype=jnp.uint32)
         self.term_weights = objective.weights
         spec = declared_params(type(self.law)).get("temperature")
@@ -140,11 +144,13 @@ class TuningProblem:
                 finite &= jnp.isfinite(x).reshape(x.shape[0], -1).all(axis=1)
         return jnp.where(ok & finite, valid, 0.0)
 
-    def smooth(self, args, theta, temperature, indices, valid):
-        """The relaxed objective at ``theta`` on runs ``indices`` (pure in its arguments)."""
+    def smooth(self, args, theta, temperature, indices, valid, gradient="forward"):
+        """The relaxed objective at ``theta`` on runs ``indices`` (pure in its arguments), to be
+        differentiated in ``gradient`` mode (with :meth:`args_for` its ``args``)."""
         sim, law, seed, term_weights = args
         law = law.relax(temperature) if temperature is not None else law.relax()
-        out = self.fn(sim, self.law_at(law, self.param.gains(theta)), seed, indices)
+        fn = self.reverse_fn if gradient == "reverse" else self.fn
+        out = fn(sim, self.law_at(law, self.param.gains(theta)), seed, indices)
         return self.objective.value(out, self.weights(out, valid), temperature, term_weights)
 
     def hard(self, args, gains_file, indices, valid):

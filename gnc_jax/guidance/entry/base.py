@@ -117,10 +117,11 @@ class EntryGuidanceContext(eqx.Module):
             its own steps (``step % pc_every == 0``), the same schedule. A Python ``bool``
             when the caller's loop is unrolled: the branch is then chosen at trace time.
         loop_kind: ``"lax"``: the corrector's rounds are a ``lax.while_loop`` (evaluation,
-            forward mode); ``"checkpointed"``: equinox's checkpointed ``while_loop`` (the same
-            rounds and arithmetic, reverse-mode differentiable with bounded memory);
-            ``"fixed"``: a masked ``lax.scan`` of the most rounds a solve can take (the same
-            arithmetic under ``vmap``, no loop predicate).
+            forward mode); ``"checkpointed"``: the same, the solution differentiated in
+            reverse mode by the implicit function theorem (one prediction reversed, with
+            equinox's checkpointed ``while_loop``); ``"fixed"``: a masked ``lax.scan`` of the
+            most rounds a solve can take (the same arithmetic under ``vmap``, no loop
+            predicate).
     """
 
     model: EntryModel

@@ -5,16 +5,17 @@ Each function takes the law (:class:`~gnc_jax.guidance.entry.skip_entry.SkipEntr
 its bounds, tolerance and loop sizes.
 """
 
-import equinox.internal as eqxi
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 
 from ..._numerics import loop_shape
-from ...root_finding import RegulaFalsiResult, regula_falsi
+from ...root_finding import RegulaFalsiResult, RootStatus, regula_falsi
 from .phases import is_direct
 from .predictor import (
     finished_prediction,
     integrating,
+    predict,
     prediction_origin,
     predictor_start,
     predictor_step,
@@ -28,8 +29,9 @@ from .state import SkipEntryState
 # average; at 16 s steps a 256-run chunk's corrector time is least at 8 (16: the same, 4: 7 %
 # more).
 ROUND_STEPS = 8
-# Round carries reverse mode keeps per corrector cycle (loop_kind "checkpointed")
-CHECKPOINTS = 16
+# Step carries kept by the one prediction reverse mode differentiates at a solution
+# (loop_kind "checkpointed"): a prediction takes about 50 steps, so none is recomputed
+PREDICTION_CHECKPOINTS = 64
 
 
 def _where(pick, new, old):
@@ -123,14 +125,18 @@ def correct(
     instead, every slot runs as long as its slowest run, which at 16 s steps costs a
     256-run chunk's corrector 7 % more. The solve is the same either way.
 
-    ``loop_kind`` (static) ``"checkpointed"``: the rounds are equinox's checkpointed
-    ``while_loop`` (bounded by the most rounds a solve can take, so never cut short) and a
-    round's steps a masked ``lax.scan`` of ``ROUND_STEPS`` (the arithmetic of the vmapped
-    ``while_loop``, whose body runs for every run and keeps the finished ones' state):
-    reverse-mode differentiable, ``CHECKPOINTS`` round carries kept. ``"fixed"``: the same
-    masked rounds as a ``lax.scan`` of that bound, every round run and a solved run's carry
-    held (no loop predicate: nothing for a GPU to wait on between rounds)."""
+    ``loop_kind`` (static) ``"fixed"``: the rounds are a ``lax.scan`` of the most rounds a
+    solve can take (bounded, so never cut short) and a round's steps a masked ``lax.scan`` of
+    ``ROUND_STEPS`` (the arithmetic of the vmapped ``while_loop``, whose body runs for every
+    run and keeps the finished ones' state), every round run and a solved run's carry held:
+    no loop predicate, nothing for a GPU to wait on between rounds. ``"checkpointed"``: the
+    ``lax`` solve, differentiated in reverse mode by the implicit function theorem at its
+    solution (:func:`implicit_correct`) instead of through its rounds."""
 
+    if loop_kind == "checkpointed":
+        return implicit_correct(
+            law, y, t, pulled_up, sigma_prev, model, target_fixed, enabled, slope, dip_altitude_m
+        )
     secant = law.corrector_start == "secant"
     solver = regula_falsi(
         law.bracket_step_rad,
@@ -153,7 +159,7 @@ def correct(
     def steps(c, sigma_0):
         """Up to ROUND_STEPS steps of the prediction."""
         fixed = not loop_shape().early_exit  # a GPU's layout: no predicate read back per step
-        if loop_kind in ("checkpointed", "fixed") or fixed:
+        if loop_kind == "fixed" or fixed:
 
             def masked(c, _):
                 new = predictor_step(law, c, sigma_0, origin.speed_mps, model)
@@ -192,15 +198,78 @@ def correct(
             return _where(solver.done(sxc[0]), sxc, round_(sxc)), None
 
         s, _, _ = jax.lax.scan(masked_round, (s, x, c), None, length=most)[0]
-    elif loop_kind == "checkpointed":
-        s, _, _ = eqxi.while_loop(
-            lambda sxc: ~solver.done(sxc[0]),
-            round_,
-            (s, x, c),
-            max_steps=most,
-            kind="checkpointed",
-            checkpoints=CHECKPOINTS,
-        )
     else:
         s, _, _ = jax.lax.while_loop(lambda sxc: ~solver.done(sxc[0]), round_, (s, x, c))
     return solver.result(s)
+
+
+def implicit_correct(
+    law, y, t, pulled_up, sigma_prev, model, target_fixed, enabled, slope=None, dip_altitude_m=None
+):
+    """:func:`correct` with the ``lax`` loops (``loop_kind = "checkpointed"``), whose solution
+    sigma_0 and predicted crossrange carry the derivative of the root itself in reverse mode
+    (the implicit function theorem): with f the predicted range error and chi the crossrange
+    of the prediction of sigma_0 from the cycle's state and model theta,
+    d sigma_0 = -(df/dtheta) dtheta / (df/dsigma_0) and
+    d chi = dchi/dsigma_0 d sigma_0 + dchi/dtheta dtheta, from one prediction at the solution.
+    The reverse pass differentiates that one prediction instead of every prediction of every
+    round of the solve, and the solution's derivative no longer depends on the path the
+    iterations took (the warm start, the bracketing). The values are those of ``"lax"``.
+
+    A solve that found no bracket (its sigma_0 the best candidate tried, often a bound) and an
+    idle run (sigma_0 the previous one, clipped) pass no derivative to the cycle's state: the
+    former is held, the latter is the previous solution's. The slope df/dsigma_0 is at most
+    -range_tolerance_m / bracket_step_rad (a flatter range error leaves the root undefined
+    within a bracket step), which bounds the derivative of a near-degenerate solve."""
+    sg = jax.lax.stop_gradient
+    inputs = (law, y, t, pulled_up, model, target_fixed, dip_altitude_m)
+    law_, y_, t_, up_, model_, target_, dip_ = sg(inputs)
+    res = correct(
+        law_, y_, t_, up_, sg(sigma_prev), model_, target_, enabled, sg(slope), dip_, "lax"
+    )
+    held = ~enabled | (res.status == RootStatus.not_bracketed)
+    x, aux = _at_root(inputs, res.x, res.aux, held)
+    previous = jnp.clip(sigma_prev, law.bank_min_rad, law.bank_max_rad)
+    return res._replace(x=jnp.where(enabled, x, previous), aux=aux)
+
+
+@eqx.filter_custom_vjp
+def _at_root(inputs, x, aux, held):
+    """``(x, aux)``, the solution of :func:`implicit_correct` and its crossrange, whose
+    reverse-mode derivative with respect to ``inputs`` is the root's."""
+    return x, aux
+
+
+@_at_root.def_fwd
+def _at_root_fwd(perturbed, inputs, x, aux, held):
+    del perturbed
+    return (x, aux), None
+
+
+@_at_root.def_bwd
+def _at_root_bwd(residuals, g, perturbed, inputs, x, aux, held):
+    del residuals
+    g_x, g_aux = (jnp.zeros_like(x) if a is None else a for a in g)
+    law = inputs[0]
+
+    def prediction(sigma, inputs, checkpoints=None):
+        law, y, t, up, model, target, dip = inputs
+        p = predict(law, y, t, up, sigma, model, target, ~held, dip, checkpoints)
+        return p.miss_m, p.crossrange_m
+
+    # the slopes in sigma_0 by forward mode, then one reverse pass with their combination
+    _, (f_s, chi_s) = jax.jvp(lambda s: prediction(s, inputs), (x,), (jnp.ones_like(x),))
+    tolerance = law.direct_range_tolerance_m if is_direct(law) else law.range_tolerance_m
+    flattest = -tolerance / law.bracket_step_rad
+    f_s = jnp.where(jnp.isfinite(f_s), jnp.minimum(f_s, flattest), flattest)
+    g_sigma = g_x + g_aux * jnp.where(jnp.isfinite(chi_s), chi_s, 0.0)
+    g_f = jnp.where(held, 0.0, -g_sigma / f_s)
+    g_chi = jnp.where(held, 0.0, g_aux)
+    # only the perturbed leaves (not the law's tables, the vehicle's constants...) get one
+    moving, fixed = eqx.partition(inputs, perturbed)
+    _, vjp = eqx.filter_vjp(
+        lambda m: prediction(x, eqx.combine(m, fixed), PREDICTION_CHECKPOINTS), moving
+    )
+    (grads,) = vjp((g_f, g_chi))
+    # a held run's prediction took no step: whatever its derivative, it passes none
+    return jax.tree_util.tree_map(lambda a: jnp.where(held, 0.0, a), grads)

@@ -16,6 +16,7 @@ loop state of :func:`predictor_start` and :func:`predictor_step` itself.
 
 from typing import NamedTuple
 
+import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
 
@@ -142,6 +143,7 @@ def predict(
     target_fixed,
     active=True,
     dip_altitude_m=None,
+    checkpoints: int | None = None,
 ) -> Prediction:
     """Predicted range error of the bank profile ``sigma_0`` (seed 003 §3.1), m.
 
@@ -161,13 +163,25 @@ def predict(
     The state is integrated as components, each step reusing the derivative evaluated at
     the end of the previous one (four right-hand sides per step, the fourth also giving
     the load); the end point is located inside the last step once, after the loop.
+
+    ``checkpoints`` (static): the steps are equinox's checkpointed ``while_loop`` (the same
+    steps and arithmetic, reverse-mode differentiable), that many step carries kept.
     """
     origin = prediction_origin(law, y, t, pulled_up, model, dip_altitude_m)
-    c = jax.lax.while_loop(
-        lambda c: integrating(law, c),
-        lambda c: predictor_step(law, c, sigma_0, origin.speed_mps, model),
-        predictor_start(law, origin, sigma_0, active, model),
-    )
+    cond = lambda c: integrating(law, c)  # noqa: E731
+    body = lambda c: predictor_step(law, c, sigma_0, origin.speed_mps, model)  # noqa: E731
+    init = predictor_start(law, origin, sigma_0, active, model)
+    if checkpoints is None:
+        c = jax.lax.while_loop(cond, body, init)
+    else:
+        c = eqxi.while_loop(
+            cond,
+            body,
+            init,
+            max_steps=law.predictor_max_steps,
+            kind="checkpointed",
+            checkpoints=checkpoints,
+        )
     return finished_prediction(law, c, y, t, model, target_fixed)
 
 

@@ -195,6 +195,8 @@ class CapsuleSystem(AbstractSystem):
         law = self.laws()[config["guidance"]["law"]]
         return sim, self.build_law(config, law_mission(law, config, sim))
 
+    reverse_on_one_device: ClassVar[bool] = True  # the flight's checkpointed while_loop
+
     def reverse_mode(self, params):
         return capsule_sim.reverse_mode(params)
 

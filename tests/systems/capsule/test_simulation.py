@@ -176,3 +176,29 @@ def test_paper_scale_skip_entry(capsule_scenario, paper_scale):
         assert -2.5 <= lo and hi <= 2.5, (name, lo, hi)
     assert abs(s["switch_speed_mps_mean"] / 7350.0 - 1.0) < 0.10
     assert abs(s["switch_altitude_km_mean"] / 78.66 - 1.0) < 0.10
+
+
+def test_reverse_mode_through_the_checkpointed_flight_matches_forward_mode():
+    """The relaxed skip-entry objective's gradient in two tracking gains: reverse mode (the
+    flight's cycles in equinox's checkpointed ``while_loop``, the corrector differentiated at
+    its solutions, ``loop_kind = "checkpointed"``) equals forward mode through the ``lax`` loops,
+    which tests the gains against differences (above). The corrector's solutions come before
+    any tracking: what reverse mode passes through them reaches no gain, and must not spoil
+    the rest (a NaN there would)."""
+    from relaxed_gradient import relaxed_objective
+
+    f, problem, theta = relaxed_objective(
+        "lunar-skip-entry",
+        "capsule",
+        ["guidance.skip_entry.k_range", "guidance.skip_entry.k_hdot"],
+    )
+    grad = jax.grad(lambda args, th: f(args, th, "reverse"), 1)
+
+    def both(reverse_args, args, th):  # one program
+        return grad(reverse_args, th), jax.jacfwd(f, 1)(args, th)
+
+    reverse, forward = (
+        np.asarray(g) for g in jax.jit(both)(problem.args_for("reverse"), problem.args, theta)
+    )
+    assert np.all(np.abs(forward) > 1e-6)
+    np.testing.assert_allclose(reverse, forward, rtol=1e-8)
