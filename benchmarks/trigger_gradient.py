@@ -2,6 +2,7 @@
 
     python benchmarks/trigger_gradient.py [--scenario bennu-apn] [--runs 16,64,1024]
         [--full-runs 16] [--objective "miss_rms+10*dv_mean"] [--temperatures 0.2,0.05,0.0125]
+        [--reverse]
 
 On common runs (run ``j`` = ``fold_in(key(0), j)``) of ``--scenario`` (``bennu-apn``: the APN
 law's Schmitt trigger on |A|; ``deep-impact-los``: the LOS law's switching curves) with its
@@ -13,7 +14,8 @@ log(trigger_on - trigger_off), log trigger_off; deep-impact-los: log(k1 - k2), l
 * a 1-D scan of the hard objective along each gain (21 points over theta +- 0.01): how many
   distinct values, how many exactly zero increments (piecewise constant) and the largest jump;
 * central differences of the hard objective at steps h = 0.3, 0.1, 0.03, 0.01;
-* the forward-mode gradient of the sigmoid-relaxed law at each ``--temperatures`` and of the
+* the forward-mode gradient of the sigmoid-relaxed law at each ``--temperatures`` (``--reverse``:
+  and its reverse-mode gradient) and of the
   event relaxation (``relaxation="event"``: hard switch, each switching event's crossing time
   differentiated; ``guidance.trigger.schmitt_trigger_event``), each compared with the hard
   central difference at h = 0.1 on the same runs: relative error |g - g_cd| / |g_cd|;
@@ -66,17 +68,23 @@ def hard_objective(problem, idx, valid):
     return lambda th: float(fn(jnp.asarray(th)))
 
 
-def relaxed_gradient(problem, theta0, idx, valid, temperature, relaxation="sigmoid"):
-    """Forward-mode gradient (theta) of the relaxed objective and its value, and wall s."""
-    sim, law, seed, w = problem.args
+def relaxed_gradient(
+    problem, theta0, idx, valid, temperature, relaxation="sigmoid", gradient="forward"
+):
+    """Gradient (theta) of the relaxed objective in ``gradient`` mode (forward: ``jacfwd``,
+    reverse: ``grad`` through the system's reverse-mode loops) and its value, and wall s."""
+    sim, law, seed, w = problem.args_for(gradient)
     if hasattr(law, "relaxation"):
         law = dataclasses.replace(law, relaxation=relaxation)
     args = (sim, law, seed, w)
 
     def f(th):
-        return problem.smooth(args, th, temperature, idx, valid)
+        return problem.smooth(args, th, temperature, idx, valid, gradient)
 
-    fn = jax.jit(lambda th: (f(th), jax.jacfwd(f)(th)))
+    if gradient == "reverse":
+        fn = jax.jit(jax.value_and_grad(f))
+    else:
+        fn = jax.jit(lambda th: (f(th), jax.jacfwd(f)(th)))
     t0 = time.perf_counter()
     value, grad = jax.block_until_ready(fn(jnp.asarray(theta0)))
     return float(value), np.asarray(grad), time.perf_counter() - t0
@@ -122,7 +130,9 @@ def rel_error(g, ref):
     return float(np.linalg.norm(g - ref) / np.linalg.norm(ref))
 
 
-def measure(name, runs, full, objective, temperatures, scans=True, steps=STEPS, event=True):
+def measure(
+    name, runs, full, objective, temperatures, scans=True, steps=STEPS, event=True, reverse=False
+):
     scenario, problem, theta0, idx, valid = setup(name, runs, full, objective)
     hard = hard_objective(problem, idx, valid)
     t0 = time.perf_counter()
@@ -140,6 +150,11 @@ def measure(name, runs, full, objective, temperatures, scans=True, steps=STEPS, 
         v, g, s = relaxed_gradient(problem, theta0, idx, valid, temp)
         row["relaxed"][f"sigmoid T={temp:g}"] = dict(value=v, grad=g.tolist(), s=s,
                                                      rel_error=rel_error(g, ref))  # fmt: skip
+        if reverse:
+            v, g, s = relaxed_gradient(problem, theta0, idx, valid, temp, gradient="reverse")
+            row["relaxed"][f"sigmoid T={temp:g}, reverse"] = dict(
+                value=v, grad=g.tolist(), s=s, rel_error=rel_error(g, ref)
+            )
     if event and hasattr(problem.law, "relaxation"):  # the laws with an event relaxation
         v, g, s = relaxed_gradient(problem, theta0, idx, valid, problem.law_temperature, "event")
         row["relaxed"]["event"] = dict(value=v, grad=g.tolist(), s=s, rel_error=rel_error(g, ref))
@@ -176,10 +191,17 @@ def main():
     p.add_argument("--temperatures", default="0.2,0.05,0.0125")
     p.add_argument("--steps", default="0.3,0.1,0.03,0.01", help="central-difference steps")
     p.add_argument("--no-event", action="store_true", help="skip the event relaxation")
+    p.add_argument(
+        "--reverse", action="store_true", help="also each temperature's reverse-mode gradient"
+    )
     p.add_argument("--json", default="", help="write the figures to this file")
     args = p.parse_args()
     temps = [float(t) for t in args.temperatures.split(",")]
-    opts = dict(steps=[float(h) for h in args.steps.split(",")], event=not args.no_event)
+    opts = dict(
+        steps=[float(h) for h in args.steps.split(",")],
+        event=not args.no_event,
+        reverse=args.reverse,
+    )
     assert REFERENCE_STEP in opts["steps"], f"--steps must include {REFERENCE_STEP}"
     rows, scenario = [], None
     for runs in [int(r) for r in args.runs.split(",") if r]:
