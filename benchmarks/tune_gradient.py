@@ -3,18 +3,20 @@ mode (``jax.grad``, through the system's :meth:`~gnc_jax.systems.AbstractSystem.
 loops) and the plain run, for a number of tunable parameters, on one core.
 
     python benchmarks/tune_gradient.py [--runs 256] [--only impactor,capsule]
-        [--short] [--modes value,forward,reverse] [--params 0,2,16,32]
+        [--short] [--modes value,forward,reverse,reverse-any] [--params 0,2,16,32]
 
 For each system with tunable gains, its example scenario (``--short``: with the system's
 ``test_overrides``) and all of its law's tunable gains: the relaxed objective of the tuner
 (``gnc_jax.tuning``, the system's smooth objective) over ``--runs`` runs, its value, its
-forward-mode gradient and its reverse-mode gradient. ``--params P``: the gradient with respect
-to ``P`` parameters, mapped into the law's gains (theta units) by a fixed random matrix
-``gains = theta_0 + A p`` (``A`` of shape gains x P, entries N(0, 1/P), seed 0): the cost of a
-gradient in ``P`` parameters whatever form they take (a schedule's knots), on the law's own
-closed loop (0: the gains themselves). Each (system, mode, P) runs in its own process so that
-the peak resident memory (``ru_maxrss``) is its own; compile time apart, best of 2 after the
-compilation, ``block_until_ready``; the compiled program's temp memory from
+forward-mode gradient and its reverse-mode gradient (``reverse``: the tuner's, told which
+gains are differentiated; ``reverse-any``: the system's reverse mode for a derivative with
+respect to anything, which leaves nothing out of the reverse pass). ``--params P``: the
+gradient with respect to ``P`` parameters, mapped into the law's gains (theta units) by a fixed
+random matrix ``gains = theta_0 + A p`` (``A`` of shape gains x P, entries N(0, 1/P), seed 0):
+the cost of a gradient in ``P`` parameters whatever form they take (a schedule's knots), on the
+law's own closed loop (0: the gains themselves). Each (system, mode, P) runs in its own
+process so that the peak resident memory (``ru_maxrss``) is its own; compile time apart, best
+of 2 after the compilation, ``block_until_ready``; the compiled program's temp memory from
 ``memory_analysis``; the process's CPU time beside the wall time (on a shared machine the
 CPU time of the one-core program is the steadier figure). The plain run (``value``) is the
 baseline, printed as a ratio.
@@ -57,8 +59,10 @@ def measure(system_name, mode, runs, short, n_params):
     theta0 = jnp.asarray(problem.param.theta([scenario[n] for n in params]))
     idx, valid = problem.padded(tuning.train_indices(0, runs, runs))
     temperature = problem.law_temperature
-    args = problem.args
-    if mode == "reverse":
+    # "reverse": the tuner's reverse mode, told which gains are differentiated; "reverse-any":
+    # the system's reverse mode for a derivative of anything (no part of the pass left out)
+    args = problem.args_for("reverse" if mode == "reverse" else "forward")
+    if mode == "reverse-any":
         args = (problem.system.reverse_mode(args[0]),) + args[1:]
     if n_params:
         a = np.random.default_rng(0).standard_normal((len(params), n_params)) / n_params**0.5
@@ -68,9 +72,11 @@ def measure(system_name, mode, runs, short, n_params):
         to_theta, theta = (lambda p: p), theta0
 
     def f(p):
-        return problem.smooth(args, to_theta(p), temperature, idx, valid, mode)
+        gradient = mode.split("-")[0]
+        return problem.smooth(args, to_theta(p), temperature, idx, valid, gradient)
 
-    fn = {"value": f, "forward": jax.jacfwd(f), "reverse": jax.grad(f)}[mode]
+    grad = jax.grad(f)
+    fn = {"value": f, "forward": jax.jacfwd(f), "reverse": grad, "reverse-any": grad}[mode]
     t0 = time.perf_counter()
     compiled = jax.jit(fn).lower(theta).compile()
     compile_s = time.perf_counter() - t0
@@ -126,7 +132,7 @@ def main():
                     else ""
                 )
                 print(
-                    f"{row['scenario']:<26} {row['params']:>2} params {mode:<8} {row['runs']} "
+                    f"{row['scenario']:<26} {row['params']:>2} params {mode:<11} {row['runs']} "
                     f"runs: {row['seconds']:.3g} s (CPU {row['cpu_s']:.3g} s){ratio}, "
                     f"compile {row['compile_s']:.0f} s, temp {row['temp_mb']:.1f} MB, "
                     f"peak RSS {row['peak_rss_mb']:.0f} MB",

@@ -288,12 +288,19 @@ def test_built_in_terms_match_numpy_and_their_relaxations_tend_to_them():
 
 def test_auto_gradient_mode_follows_the_number_of_parameters(monkeypatch):
     """``gradient="auto"`` runs forward mode below ``REVERSE_FROM`` parameters and reverse
-    mode from it on; both give the steps the named mode gives (the same gradient)."""
+    mode from it on, or the cheaper by a system's measured costs; both give the steps the
+    named mode gives (the same gradient)."""
     from gnc_jax.tuning import optimisers
 
     assert optimisers.gradient_mode("auto", optimisers.REVERSE_FROM - 1) == "forward"
     assert optimisers.gradient_mode("auto", optimisers.REVERSE_FROM) == "reverse"
     assert optimisers.gradient_mode("forward", 100) == "forward"
+    # a system's measured costs: forward 3 + p plain runs, reverse 4.5 (on one device while
+    # forward mode shards over two: 9)
+    costs = (3.0, 1.0, 4.5)
+    assert [optimisers.gradient_mode("auto", p, costs) for p in (1, 2)] == ["forward", "reverse"]
+    on_one = [optimisers.gradient_mode("auto", p, costs, 2) for p in (5, 6, 7)]
+    assert on_one == ["forward", "forward", "reverse"]
     kw = dict(batch=6, steps=3, heldout_runs=0, learning_rate=0.2, check_runs=0, seed=2)
     fwd = tune(toy(), "guidance.pn.n", "miss_rms", gradient="forward", **kw)
     rev = tune(toy(), "guidance.pn.n", "miss_rms", gradient="reverse", **kw)

@@ -27,6 +27,7 @@ import abc
 import importlib
 import importlib.metadata
 import os
+from collections.abc import Collection
 from typing import Any, ClassVar, NamedTuple
 
 from ..params import declared_params, file_name, schema_of
@@ -292,12 +293,22 @@ class AbstractSystem(abc.ABC):
     def simulate(self, params, law, key, record: bool = False):
         """One run: ``(outcome, trace)``; ``trace`` is ``None`` unless ``record``."""
 
-    def reverse_mode(self, params):
+    def reverse_mode(self, params, differentiated: Collection[str] | None = None):
         """``params`` set up to be differentiated in reverse mode (``jax.grad``): the same
         outcomes, from loops that reverse mode can cross with bounded memory (a system whose
-        loops are ``lax.while_loop`` swaps them for checkpointed ones). Default: ``params``
-        (scans, each of whose steps the simulator checkpoints itself)."""
+        loops are ``lax.while_loop`` swaps them for checkpointed ones). ``differentiated``:
+        the scenario names of the only parameters differentiated (``None``: anything may
+        be), which lets a system leave out of the reverse pass what none of them reaches.
+        Default: ``params`` (scans, each of whose steps the simulator checkpoints itself)."""
+        del differentiated
         return params
+
+    gradient_costs: ClassVar[tuple[float, float, float] | None] = None
+    """``(a, b, r)``: a tuning gradient's cost measured on the system's own loop, in plain runs
+    of the same batch on one device: forward mode ``a + b p`` for ``p`` parameters, the
+    tuner's reverse mode ``r`` whatever their number; ``gradient="auto"`` takes the cheaper
+    (:func:`~gnc_jax.tuning.optimisers.gradient_mode`). ``None``: reverse mode from
+    :data:`~gnc_jax.tuning.optimisers.REVERSE_FROM` parameters on."""
 
     reverse_on_one_device: ClassVar[bool] = False
     """Whether reverse mode runs a batch on one device instead of sharding it: equinox's

@@ -9,16 +9,22 @@ the impactor checkpoints each image step of its scan (one loop state kept per im
 image's control steps recomputed on the way back, each of them checkpointed in turn); the
 capsule flies its cycles in equinox's checkpointed ``while_loop`` (the same trip counts and
 arithmetic as its ``lax.while_loop``, bounded memory) and differentiates its corrector's
-solutions by the implicit function theorem. ``"auto"`` (the default) takes
-reverse mode from :data:`REVERSE_FROM` parameters on. Measured with
+solutions by the implicit function theorem, or, when every tuned gain acts only after its
+last solution (its tracking gains), passes none through them. ``"auto"`` (the default) takes
+the cheaper mode by the system's measured costs
+(:attr:`~gnc_jax.systems.AbstractSystem.gradient_costs`), by default reverse mode from
+:data:`REVERSE_FROM` parameters on. Measured with
 ``benchmarks/tune_gradient.py --only impactor --modes value,forward,reverse --params
 2,4,6,8`` (deep-impact-los, 256 runs, one step, compile apart, the shared 2-core machine at
 load 2-4, wall time): value 0.22 s; forward mode 0.60 / 0.89 / 0.98 / 1.24 s for 2 / 4 / 6 / 8
 parameters; reverse mode 0.91-1.29 s whatever the number, peak RSS 1.8-2.0x the value's against
-1.3-1.5x for forward mode: the LOS loop's crossover is at 6-8 parameters. The capsule's is at
-or below its 4 gains: forward mode 6.7x a value for them, reverse mode 5.2-5.3x whatever the
-number (``--only capsule --modes value,reverse --params 2,16,32``, idle). Ten is above both:
-forward mode for a law's few gains, reverse mode for schedules.
+1.3-1.5x for forward mode: the LOS loop's crossover is at 6-8 parameters, and ten, the
+default, is above it: forward mode for a law's few gains, reverse mode for schedules. The
+capsule's is below one parameter on one device: forward mode 4.3x a value with one tangent and
+10.7x with its four gains, the tuner's reverse mode 3.2-3.4x whatever the number (``--only
+capsule --modes value,forward,reverse --params 0,1,2,16,32``, idle; its ``gradient_costs``).
+Its reverse mode runs on one device where forward mode shards: with two devices forward mode
+is the cheaper for one or two parameters, with sixteen up to about 24.
 
 **Gradient-free baseline** (``method="es"``): an antithetic evolution strategy in the same
 ``theta`` with the same optimiser, evaluated with the hard logic; each generation flies
@@ -48,12 +54,19 @@ REVERSE_FROM = 10
 crossover: see the module docstring), forward mode below it."""
 
 
-def gradient_mode(gradient: str, n_params: int) -> str:
-    """``"forward"`` or ``"reverse"``: ``gradient`` itself, or for ``"auto"`` the cheaper by
-    the number of tuned parameters (:data:`REVERSE_FROM`)."""
+def gradient_mode(gradient: str, n_params: int, costs=None, reverse_devices: int = 1) -> str:
+    """``"forward"`` or ``"reverse"``: ``gradient`` itself, or for ``"auto"`` the cheaper for
+    ``n_params`` tuned parameters. With a system's measured ``costs`` ``(a, b, r)``
+    (:attr:`~gnc_jax.systems.AbstractSystem.gradient_costs`): reverse mode where ``r`` times
+    ``reverse_devices`` is below ``a + b n_params`` (``reverse_devices``: the devices forward
+    mode shards a batch over where reverse mode runs it on one); without, reverse mode from
+    :data:`REVERSE_FROM` parameters on."""
     if gradient != "auto":
         return gradient
-    return "reverse" if n_params >= REVERSE_FROM else "forward"
+    if costs is None:
+        return "reverse" if n_params >= REVERSE_FROM else "forward"
+    a, b, r = costs
+    return "reverse" if r * reverse_devices < a + b * n_params else "forward"
 
 
 def _schedule(learning_rate, steps):

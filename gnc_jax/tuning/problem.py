@@ -85,7 +85,8 @@ class TuningProblem:
         ``gradient == "reverse"`` (:meth:`~gnc_jax.systems.AbstractSystem.reverse_mode`)."""
         if gradient != "reverse":
             return self.args
-        return (self.system.reverse_mode(self.sim),) + self.args[1:]
+        names = [g.name for g in self.gains]
+        return (self.system.reverse_mode(self.sim, names),) + self.args[1:]
 
     def jitted(self, kind: str, build_fn):
         key = (

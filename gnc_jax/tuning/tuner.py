@@ -80,8 +80,9 @@ def tune(
             runs every ``eval_every`` steps (0: never) for :meth:`TuneResult.runs_to_reach`.
         gradient: ``"forward"`` (``jax.jacfwd``: a tangent per parameter), ``"reverse"``
             (``jax.grad`` through the system's checkpointed loops: a cost that does not grow
-            with the parameters) or ``"auto"``: reverse from
-            :data:`~gnc_jax.tuning.optimisers.REVERSE_FROM` parameters on, else forward.
+            with the parameters) or ``"auto"``: the cheaper by the system's measured costs and
+            the devices (:func:`~gnc_jax.tuning.optimisers.gradient_mode`), by default reverse
+            from :data:`~gnc_jax.tuning.optimisers.REVERSE_FROM` parameters on.
         population, sigma: antithetic pairs per generation and the perturbation in theta
             (``method="es"``; for ``"cma"``: ``2 x population`` candidates, initial step).
         check_runs, check_every: every ``check_every`` steps (default: an eighth of the
@@ -124,7 +125,9 @@ def tune(
             check_every=max(steps // 8, 1) if check_every is None else check_every,
             check_indices=check_indices,
         )
-        gradient = gradient_mode(gradient, len(names))
+        system = problem.system
+        one_device = problem.n_dev if system.reverse_on_one_device else 1
+        gradient = gradient_mode(gradient, len(names), system.gradient_costs, one_device)
         history, theta, compile_s, wall_s = run(
             problem, theta0, opt, temps, batch, steps, train_runs, gradient, population, sigma,
             monitor, callback, seed,

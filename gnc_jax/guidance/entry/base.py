@@ -119,9 +119,10 @@ class EntryGuidanceContext(eqx.Module):
         loop_kind: ``"lax"``: the corrector's rounds are a ``lax.while_loop`` (evaluation,
             forward mode); ``"checkpointed"``: the same, the solution differentiated in
             reverse mode by the implicit function theorem (one prediction reversed, with
-            equinox's checkpointed ``while_loop``); ``"fixed"``: a masked ``lax.scan`` of the
-            most rounds a solve can take (the same arithmetic under ``vmap``, no loop
-            predicate).
+            equinox's checkpointed ``while_loop``); ``"held"``: the same solve, its solution
+            passing no derivative (reverse mode when what is differentiated acts only after
+            the corrector's last cycle); ``"fixed"``: a masked ``lax.scan`` of the most
+            rounds a solve can take (the same arithmetic under ``vmap``, no loop predicate).
     """
 
     model: EntryModel

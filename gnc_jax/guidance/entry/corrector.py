@@ -131,8 +131,15 @@ def correct(
     run and keeps the finished ones' state), every round run and a solved run's carry held:
     no loop predicate, nothing for a GPU to wait on between rounds. ``"checkpointed"``: the
     ``lax`` solve, differentiated in reverse mode by the implicit function theorem at its
-    solution (:func:`implicit_correct`) instead of through its rounds."""
+    solution (:func:`implicit_correct`) instead of through its rounds. ``"held"``: the ``lax``
+    solve passing no derivative at all."""
 
+    if loop_kind == "held":
+        held = jax.lax.stop_gradient(
+            (law, y, t, pulled_up, sigma_prev, model, target_fixed, slope, dip_altitude_m)
+        )
+        law, y, t, pulled_up, sigma_prev, model, target_fixed, slope, dip_altitude_m = held
+        loop_kind = "lax"
     if loop_kind == "checkpointed":
         return implicit_correct(
             law, y, t, pulled_up, sigma_prev, model, target_fixed, enabled, slope, dip_altitude_m

@@ -396,6 +396,9 @@ class SkipEntryParameters(AbstractEntryGuidance):
     n_iter: int = param(6, lo=1, hi=100, doc="regula-falsi iterations of the corrector")
 
     schedules = {f"{g}_schedule": g for g in TRACKING_GAINS}  # schedule -> the gain it replaces
+    # fields read only by the tracking phase (eqs. 6-7), which no run leaves and which follows
+    # the first entry, the only phase that runs the corrector: none reaches its solutions
+    acts_after_corrector = frozenset(TRACKING_GAINS) | frozenset(schedules)
     schedule_breakpoints = "schedule_speed_kmps"
 
     @classmethod

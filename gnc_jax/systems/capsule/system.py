@@ -196,9 +196,27 @@ class CapsuleSystem(AbstractSystem):
         return sim, self.build_law(config, law_mission(law, config, sim))
 
     reverse_on_one_device: ClassVar[bool] = True  # the flight's checkpointed while_loop
+    # forward mode 4.3x a plain run for one parameter, 10.7x for the four gains; the tuner's
+    # reverse mode 3.2-3.4x whatever their number (256 runs, one device, idle:
+    # benchmarks/tune_gradient.py --only capsule --modes value,forward,reverse)
+    gradient_costs: ClassVar[tuple[float, float, float]] = (2.2, 2.1, 3.4)
 
-    def reverse_mode(self, params):
-        return capsule_sim.reverse_mode(params)
+    def reverse_mode(self, params, differentiated=None):
+        """The flight's checkpointed loops (:func:`~.simulation.reverse_mode`), the
+        corrector's solutions passing no derivative when every ``differentiated`` name is a
+        field of the law's ``acts_after_corrector`` (its tracking gains and their schedules)."""
+        return capsule_sim.reverse_mode(params, not self._after_corrector(differentiated))
+
+    def _after_corrector(self, names) -> bool:
+        if not names:
+            return False
+        laws = self.laws()
+        for name in names:
+            section, law_name, field = (name.split("[")[0].split(".", 2) + ["", ""])[:3]
+            law = laws.get(law_name) if section == "guidance" else None
+            if law is None or field not in getattr(law, "acts_after_corrector", ()):
+                return False
+        return True
 
     def simulate(self, params, law, key, record=False):
         return capsule_sim.simulate(params, law, key, record=record)

@@ -302,7 +302,7 @@ class ImpactorSystem(AbstractSystem):
     def simulate(self, params, law, key, record=False):
         return impactor_sim.simulate(params, law, key, record=record)
 
-    def reverse_mode(self, params):
+    def reverse_mode(self, params, differentiated=None):
         """``params`` with the fenced computations of the closed loop given their own
         reverse-mode rules (:attr:`~.state.ImpactorSimulation.reverse_mode`)."""
         return dataclasses.replace(params, reverse_mode=True)

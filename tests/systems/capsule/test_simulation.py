@@ -98,10 +98,13 @@ def test_downrange_gradient_wrt_tracking_gains_matches_finite_differences(
     difference quotients disagreeing and skipped; the derivative must match on the others,
     and most runs must qualify.
 
-    Reverse mode (the flight's cycles in equinox's checkpointed ``while_loop``, the corrector
-    differentiated at its solutions) gives the forward-mode derivative run by run: the
-    tracking gains act after the last solve, and what reverse mode passes back through the
-    solutions reaches no gain and must not spoil the rest (a NaN there would).
+    Reverse mode gives the forward-mode derivative run by run: the tuner's (the flight's
+    cycles in equinox's checkpointed ``while_loop``, the corrector's solutions passing no
+    derivative, since the tracking gains act after the last of them) and, with --paper-scale,
+    the one for a derivative of anything, which differentiates every solution: what it
+    passes back through them reaches no gain and must not spoil the rest (a NaN there would).
+    The solutions' derivative itself is checked against differences of converged solves in
+    tests/guidance/entry/test_skip_entry.py.
 
     CI runs two of the gains (range and Ḣ feedback) on two runs; --paper-scale all four on
     three."""
@@ -141,8 +144,24 @@ def test_downrange_gradient_wrt_tracking_gains_matches_finite_differences(
     np.testing.assert_allclose(jac[smooth], fd[smooth, 1], rtol=1e-4, atol=1e-4 * scale.max())
     moved = np.abs(jac[smooth]).max(axis=1)  # the gains do move the chute point (km per unit)
     assert np.all(moved > 0.1) if paper_scale else moved.max() > 0.1
-    backward = jax.vmap(lambda i: jax.grad(downrange)(g0, i, reverse_mode(sim)))
-    np.testing.assert_allclose(np.asarray(jax.jit(backward)(runs)), jac, rtol=1e-6)
+    # the tuner's reverse pass (these gains act after the corrector's last solution: none is
+    # differentiated); with --paper-scale also the one that differentiates every solution
+    for corrector_derivative in (False, True) if paper_scale else (False,):
+        flown = reverse_mode(sim, corrector_derivative)
+        backward = jax.vmap(lambda i, flown=flown: jax.grad(downrange)(g0, i, flown))
+        np.testing.assert_allclose(np.asarray(jax.jit(backward)(runs)), jac, rtol=1e-6)
+
+
+def test_reverse_mode_leaves_out_the_corrector_only_for_gains_acting_after_it():
+    """The tuner's reverse pass differentiates the corrector's solutions unless every
+    differentiated parameter is one the law reads only after the corrector's last cycle."""
+    system = gj.get_system("capsule")
+    sim, _ = gj.build(gj.load_scenario(system.example))
+    after = ["guidance.skip_entry.k_range", "guidance.skip_entry.k_hdot_schedule[3]"]
+    assert not system.reverse_mode(sim, after).corrector_derivative
+    for names in (None, [], after + ["guidance.skip_entry.ratio_filter_gain"], ["entry.range_km"]):
+        flown = system.reverse_mode(sim, names)
+        assert flown.loop_kind == "checkpointed" and flown.corrector_derivative
 
 
 def test_capsule_report_writes_the_paper_figures(capsule_scenario, tmp_path):
@@ -188,12 +207,18 @@ def test_paper_scale_skip_entry(capsule_scenario, paper_scale):
 def test_the_tuners_reverse_mode_traces_on_every_device_count():
     """The tuner's reverse-mode objective of the capsule (the flight's checkpointed
     ``while_loop``, which equinox cannot differentiate inside ``shard_map``) is traced through
-    ``jax.grad`` with the test processes' two host devices: its batches run on one device."""
+    ``jax.grad`` with the test processes' two host devices: its batches run on one device.
+    So is the reverse pass that differentiates the corrector's solutions, which the tuner
+    leaves out for the tracking gains."""
     from relaxed_gradient import relaxed_objective
 
     f, problem, theta = relaxed_objective(
         "lunar-skip-entry", "capsule", ["guidance.skip_entry.k_range"]
     )
     assert problem.n_dev == len(jax.devices()) and problem.reverse_fn is not problem.fn
-    grad = jax.grad(lambda th: f(problem.args_for("reverse"), th, "reverse"))
-    assert jax.eval_shape(grad, theta).shape == theta.shape
+    tuners = problem.args_for("reverse")
+    assert not tuners[0].corrector_derivative
+    any_ = (problem.system.reverse_mode(problem.sim),) + problem.args[1:]
+    for args in (tuners, any_):
+        grad = jax.grad(lambda th, args=args: f(args, th, "reverse"))
+        assert jax.eval_shape(grad, theta).shape == theta.shape
