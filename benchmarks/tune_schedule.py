@@ -4,12 +4,13 @@ and CMA-ES (the ``cma`` package) on the hard logic.
 
     python benchmarks/tune_schedule.py [--batch 64] [--steps 30] [--heldout 2000]
         [--eval-every 2] [--eval-runs 256] [--methods adam,es,cma] [--population 4]
-        [--check-runs 256] [--setup los|skip-entry] [--breakpoints 0,120,...]
+        [--check-runs 256] [--setup los|skip-entry|skip-entry-gains] [--breakpoints 0,...]
 
 ``deep-impact-los`` with k1 and k2 scheduled over time to go at 8 breakpoints each (16
 knots), starting from the packaged constant gains (4, 1) at every knot (the same flight as
 the packaged law); ``--setup skip-entry``: ``lunar-skip-entry``'s overall tracking gain
-k_range scheduled over speed at 6 breakpoints, chute-deploy RMS error. Each method:
+k_range scheduled over speed at 6 breakpoints, chute-deploy RMS error; ``--setup
+skip-entry-gains``: all four tracking gains so scheduled (24 knots). Each method:
 ``gj.tune`` with the same batch, steps and seed (the training check on ``--check-runs``
 runs); the hard objective on ``--eval-runs`` held-out runs every ``--eval-every`` steps
 (not timed); the final paired comparison against the packaged gains on ``--heldout``
@@ -38,6 +39,14 @@ SETUPS = {
         "guidance.skip_entry.schedule_speed_kmps",
         [0.5, 2.0, 4.0, 6.0, 8.0, 11.0],
         "guidance.skip_entry.k_range_schedule",
+        "chute_rms",
+    ),
+    "skip-entry-gains": (
+        "lunar-skip-entry",
+        "guidance.skip_entry.schedule_speed_kmps",
+        [0.5, 2.0, 4.0, 6.0, 8.0, 11.0],
+        "guidance.skip_entry.k_range_schedule,guidance.skip_entry.k_drag_load_schedule,"
+        "guidance.skip_entry.k_hdot_schedule,guidance.skip_entry.k_range_rate_schedule",
         "chute_rms",
     ),
 }

@@ -309,6 +309,8 @@ def test_auto_gradient_mode_follows_the_number_of_parameters(monkeypatch):
     monkeypatch.setattr(optimisers, "REVERSE_FROM", 1)
     auto_rev = tune(toy(), "guidance.pn.n", "miss_rms", **kw)
     assert [h["gains"] for h in auto_rev.history] == [h["gains"] for h in rev.history]
+    assert (auto.gradient, auto_rev.gradient) == ("forward", "reverse")  # as the result says
+    assert auto.summary()["gradient"] == "forward"
     np.testing.assert_allclose(
         [h["gains"] for h in rev.history], [h["gains"] for h in fwd.history], rtol=1e-9
     )

@@ -264,7 +264,9 @@ def cmd_tune(args) -> int:
         device=args.device,
     )
     print(
-        f"{scenario.name}: {args.method}, {args.steps} steps of {args.batch} runs, compile "
+        f"{scenario.name}: {args.method}"
+        + (f" ({result.gradient} mode)" if result.gradient else "")
+        + f", {args.steps} steps of {args.batch} runs, compile "
         f"{result.compile_s:.1f} s, training {result.wall_s:.1f} s"
     )
     for name, a, b in zip(names, result.initial, result.tuned, strict=True):

@@ -44,6 +44,7 @@ class TuneResult:
     compile_s: float
     wall_s: float
     training_check: dict | None = None
+    gradient: str | None = None  # adam's gradient mode, "forward" or "reverse" (None: es, cma)
 
     @property
     def tuned_gains(self) -> dict[str, float]:
@@ -74,6 +75,8 @@ class TuneResult:
             k: getattr(self, k)
             for k in ("names", "initial", "tuned", "objective", "method", "seed", "batch")
         }
+        if self.gradient:
+            out["gradient"] = self.gradient
         out.update(steps=self.steps, compile_s=self.compile_s, wall_s=self.wall_s)
         out["training_check"] = self.training_check
         if self.heldout:

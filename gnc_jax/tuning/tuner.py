@@ -145,6 +145,7 @@ def tune(
         return TuneResult(
             scenario, tuned_scenario, names, initial, tuned, objective_.spec, method, seed, batch,
             steps, history, heldout, compile_s, wall_s, check,
+            gradient if method == "adam" else None,
         )  # fmt: skip
 
 
