@@ -126,8 +126,8 @@ def tune(
             check_indices=check_indices,
         )
         system = problem.system
-        one_device = problem.n_dev if system.reverse_on_one_device else 1
-        gradient = gradient_mode(gradient, len(names), system.gradient_costs, one_device)
+        reverse_devices = problem.n_dev if system.reverse_on_one_device else 1
+        gradient = gradient_mode(gradient, len(names), system.gradient_costs, reverse_devices)
         history, theta, compile_s, wall_s = run(
             problem, theta0, opt, temps, batch, steps, train_runs, gradient, population, sigma,
             monitor, callback, seed,
