@@ -77,14 +77,7 @@ def relaxed_gradient(
     if hasattr(law, "relaxation"):
         law = dataclasses.replace(law, relaxation=relaxation)
     args = (sim, law, seed, w)
-
-    def f(th):
-        return problem.smooth(args, th, temperature, idx, valid, gradient)
-
-    if gradient == "reverse":
-        fn = jax.jit(jax.value_and_grad(f))
-    else:
-        fn = jax.jit(lambda th: (f(th), jax.jacfwd(f)(th)))
+    fn = jax.jit(lambda th: problem.value_and_grad(args, th, temperature, idx, valid, gradient))
     t0 = time.perf_counter()
     value, grad = jax.block_until_ready(fn(jnp.asarray(theta0)))
     return float(value), np.asarray(grad), time.perf_counter() - t0

@@ -12,8 +12,8 @@ def relaxed_objective(scenario: str, system: str, names: list[str], runs: int = 
     """``(f, problem, theta)``: ``f(args, theta, gradient="forward")`` is the relaxed objective
     of the gains ``names`` (at the law's temperature) over the first ``runs`` runs of
     ``scenario`` with ``system``'s ``test_overrides``; ``theta`` the scenario's own gains in the
-    tuner's units;
-    ``problem.args`` and ``problem.args_for("reverse")`` its first argument in either mode."""
+    tuner's units; ``problem.args`` and ``problem.args_for("reverse")`` its first argument in
+    either mode."""
     sc = gj.load_scenario(scenario, overrides=gj.get_system(system).test_overrides)
     problem = tuning.TuningProblem(
         sc, tuning.resolve_gains(sc, names), tuning.parse_objective(None, sc), 0

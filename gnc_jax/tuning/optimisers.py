@@ -108,16 +108,7 @@ def _run_adam(
 ):  # fmt: skip
     def build_step():
         def value_and_grad(args, th, temperature, idx, valid):
-            f = lambda t: problem.smooth(args, t, temperature, idx, valid, gradient)  # noqa: E731
-            if gradient == "reverse":
-                return jax.value_and_grad(f)(th)
-
-            def twice(t):
-                value = f(t)
-                return value, value
-
-            jac, value = jax.jacfwd(twice, has_aux=True)(th)
-            return value, jac
+            return problem.value_and_grad(args, th, temperature, idx, valid, gradient)
 
         return value_and_grad
 

@@ -154,6 +154,21 @@ class TuningProblem:
         out = fn(sim, self.law_at(law, self.param.gains(theta)), seed, indices)
         return self.objective.value(out, self.weights(out, valid), temperature, term_weights)
 
+    def value_and_grad(self, args, theta, temperature, indices, valid, gradient):
+        """The relaxed objective at ``theta`` (:meth:`smooth`) and its gradient: ``jax.grad``
+        for ``gradient == "reverse"`` (``args`` from :meth:`args_for`), else ``jax.jacfwd``
+        (the value its primal)."""
+        f = lambda t: self.smooth(args, t, temperature, indices, valid, gradient)  # noqa: E731
+        if gradient == "reverse":
+            return jax.value_and_grad(f)(theta)
+
+        def twice(t):
+            value = f(t)
+            return value, value
+
+        jac, value = jax.jacfwd(twice, has_aux=True)(theta)
+        return value, jac
+
     def hard(self, args, gains_file, indices, valid):
         """``(objective, outcomes)`` of the hard logic with gains ``gains_file``."""
         sim, law, seed, term_weights = args
