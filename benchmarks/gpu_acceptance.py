@@ -28,6 +28,8 @@ at the end of the output.
 * ``bench`` (if time is left): ``python -m benchmarks --device gpu``: the device suite with the
   numba peer on the same machine's CPU cores (``benchmarks/gpu.py``).
 
+``--parts a,b``: only these parts (``status_cpu`` among them runs in the background as above).
+
 ``--quick`` runs every part at a few runs on whatever JAX finds (``auto``: a smoke test on a CPU).
 """
 
@@ -302,8 +304,12 @@ def main() -> None:
     p.add_argument("--out", required=True)
     p.add_argument("--budget", type=float, default=400.0, help="seconds for all parts")
     p.add_argument("--quick", action="store_true", help="a few runs each, on whatever JAX finds")
+    p.add_argument("--parts", default=",".join(PARTS), help="the parts to run, comma-separated")
     p.add_argument("--part", default=None, help=argparse.SUPPRESS)  # a child's part
     args = p.parse_args()
+    chosen = args.parts.split(",")
+    if unknown := sorted(set(chosen) - set(PARTS)):
+        p.error(f"--parts: unknown {', '.join(unknown)}; allowed: {', '.join(PARTS)}")
     plan = sizes(args.quick)
     pathlib.Path(args.out, "parts").mkdir(parents=True, exist_ok=True)
     sys.path.insert(0, str(ROOT))
@@ -325,9 +331,12 @@ def main() -> None:
     report = pathlib.Path(args.out) / "acceptance.json"
     cores = sorted(os.sched_getaffinity(0))
     cpu_env = dict(os.environ, JAX_PLATFORMS="cpu", GNC_JAX_HOST_DEVICES="4")
-    background = _child(args, "status_cpu", cpu_env, set(cores[-4:]) if len(cores) > 8 else None)
+    background = None
+    if "status_cpu" in chosen:
+        cpu_cores = set(cores[-4:]) if len(cores) > 8 else None
+        background = _child(args, "status_cpu", cpu_env, cpu_cores)
     for name, (_, limit) in PARTS.items():
-        if name == "status_cpu":
+        if name == "status_cpu" or name not in chosen:
             continue
         limit *= QUICK_SLOWER if args.quick else 1
         left = args.budget - (time.perf_counter() - t0)
@@ -342,10 +351,10 @@ def main() -> None:
             rc=rc, part_s=round(time.perf_counter() - start, 1), result=_part_result(args, name)
         )
         report.write_text(json.dumps(doc, indent=1, default=str))
-    left = args.budget - (time.perf_counter() - t0)
-    rc = _finish(background, left)
-    doc["parts"]["status_cpu"] = dict(rc=rc, result=_part_result(args, "status_cpu"))
-    doc["statuses"] = compare_statuses(args, plan)
+    if background is not None:
+        rc = _finish(background, args.budget - (time.perf_counter() - t0))
+        doc["parts"]["status_cpu"] = dict(rc=rc, result=_part_result(args, "status_cpu"))
+        doc["statuses"] = compare_statuses(args, plan)
     doc["elapsed_s"] = round(time.perf_counter() - t0, 1)
     report.write_text(json.dumps(doc, indent=1, default=str))
     print_table(doc)
@@ -368,7 +377,7 @@ def print_table(doc) -> None:
             print(f"sweep: {res['rows']}; default/best {res['default_over_best']}")
         else:
             print(f"{name}: rc {part.get('rc')} {part.get('skipped', '')}")
-    for name, cmp in doc["statuses"].items():
+    for name, cmp in doc.get("statuses", {}).items():
         print(f"statuses {name}: {cmp}")
 
 

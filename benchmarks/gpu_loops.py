@@ -25,7 +25,9 @@ every variant) and a table on stdout.
 The variants above patch the package from outside (how its per-platform loop layout was
 chosen; ``benchmarks/gpu_loops_h100.json``). ``--sweep "bennu-apn:2000:1,4,8,16 ..."`` times the
 package's own :class:`~gnc_jax._numerics.LoopShape` instead, in this process: each item
-``scenario:runs:unrolls`` runs one chunk per unroll, unfenced, against the platform default.
+``scenario:runs:shapes`` runs one chunk per shape against the system's GPU default; a shape is
+an unroll, ``c`` after it carries the loop's vectors by component (``8c``) and ``a`` in arrays
+(``8a``); without a letter the system's default layout is kept.
 """
 
 import argparse
@@ -134,28 +136,44 @@ def sweep(items, out):
     """``items``: ``scenario:runs:u1,u2,...``; each study unfenced at each unroll, one chunk."""
     import jax
     import numpy as np
+    from gpu_kernels import loop_bodies
 
     import gnc_jax as gj
+    from gnc_jax import montecarlo
     from gnc_jax._numerics import for_platform, loop_shape, using_loop_shape
 
     rec = dict(backend=jax.default_backend(), default=list(loop_shape()), studies=[])
     for item in items:
-        name, runs, unrolls = item.split(":")
+        name, runs, tokens = item.split(":")
         runs, scen, first = int(runs), gj.load_scenario(name), None
-        for u in [None] + [int(x) for x in unrolls.split(",")]:
-            shape = None if u is None else for_platform("gpu")._replace(unroll=u)
+        base = for_platform("gpu", scen.system)
+        rec.setdefault("system_default", {})[name] = list(base)
+        for u in [None] + tokens.split(","):
+            shape = None
+            if u is not None:
+                layout = dict(c=dict(components=True), a=dict(components=False))
+                shape = base._replace(unroll=int(u.rstrip("ac")), **layout.get(u[-1], {}))
+            montecarlo._COMPILED.clear()
             with using_loop_shape(shape):
                 kw = dict(runs=runs, seed=0, chunk_size=runs, progress=False, max_hours=1e6)
                 st = gj.run_study(scen, **kw)
                 st2 = gj.run_study(scen, **kw)
+            kernels = [  # per loop body (trip count: kernels), the threefry hash's loop left out
+                f"{b['trip']}: {sum(v for k, v in b['ops'].items() if not k.startswith('in-'))}"
+                for c in montecarlo._COMPILED.values()
+                for b in loop_bodies(c.as_text())
+                if b["trip"] != 5
+            ]
             status = np.asarray(st.status)
             row = dict(
                 scenario=name,
                 runs=runs,
                 shape="default" if u is None else f"unroll{u}",
+                loop_shape=list(shape or base),
                 compile_s=round(float(st.compile_s), 3),
                 wall_s=round(float(st.wall_s), 4),
                 wall2_s=round(float(st2.wall_s), 4),
+                kernels=kernels,
             )
             if first is None:
                 first = st
@@ -199,14 +217,14 @@ def main():
     p.add_argument("--variant", default="")
     p.add_argument("--json", default="")
     p.add_argument("--work", default="/tmp/gpu_loops")
-    p.add_argument("--sweep", nargs="*", default=None, help="scenario:runs:unroll,unroll,...")
+    p.add_argument("--sweep", nargs="*", default=None, help="scenario:runs:8,8c,8a,...")
     args = p.parse_args()
     if args.child:
         return child(args)
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if args.sweep:
-        sys.path.insert(0, str(ROOT))
+        sys.path[:0] = [str(ROOT), str(HERE.parent)]
         return sweep(args.sweep, out)
     work = pathlib.Path(args.work)
     work.mkdir(parents=True, exist_ok=True)

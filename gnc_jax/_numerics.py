@@ -173,9 +173,10 @@ class LoopShape(NamedTuple):
     done; without it the loop runs its fixed bound with the finished runs masked (the same
     values), so that a GPU does not read the loop's predicate back to the host every trip.
     ``components``: a closed loop that supports it carries its per-run 3-vectors by component
-    (:class:`V3`, the intercept's): on a GPU a 3-vector stacked under ``vmap`` is a kernel
-    and a transpose of its own; on a CPU the three times as many loop outputs measured slower
-    (``bennu-apn``, 200 runs: about 1.5x).
+    (:class:`V3`: the intercept's whole loop state, the impactor's filter mean through its
+    control steps): on a GPU a 3-vector stacked under ``vmap`` is a kernel and a transpose of
+    its own; on a CPU the three times as many loop outputs measured slower (``bennu-apn``,
+    200 runs: about 1.5x).
 
     The defaults are per platform (:func:`for_platform`), measured on each: on a CPU a fence
     saves XLA recomputing the command in every consumer loop and unrolling gains nothing

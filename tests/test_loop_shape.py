@@ -69,7 +69,10 @@ def test_platform_defaults_and_override():
     assert for_platform("gpu", intercept) == LoopShape(
         fence=False, unroll=8, early_exit=False, components=True
     )
-    assert for_platform("gpu", gj.get_system("impactor")) == for_platform("gpu")
+    assert for_platform("gpu", gj.get_system("impactor")) == LoopShape(
+        fence=False, unroll=5, early_exit=False, components=True
+    )
+    assert for_platform("gpu", gj.get_system("capsule")) == for_platform("gpu")
     assert for_platform("cpu", intercept) == for_platform("cpu")
     # and its own CPU layout: the impactor unrolls its control steps, fenced as the CPU's
     impactor_cpu = for_platform("cpu", gj.get_system("impactor"))

@@ -94,6 +94,9 @@ H100_SOURCE = "an H100 80GB (jax 0.11.2): benchmarks/gpu_acceptance_h100.json"
 """Where the packaged systems' GPU cost models were measured (``benchmarks/gpu_acceptance.py``,
 the capsule's in ``benchmarks/backend_probe_h100.json``; re-measure with
 ``benchmarks/cost_calibration.py --device gpu``)."""
+H100_LAYOUT_SOURCE = "an H100 80GB (jax 0.11.2): benchmarks/gpu_layout_h100.json"
+"""Where a GPU cost model measured in a system's own accelerator layout was taken
+(``benchmarks/gpu_loops.py --sweep`` and the CLI)."""
 
 
 class AbstractSystem(abc.ABC):

@@ -25,7 +25,7 @@ from ...navigation.centroid import extract_centroid
 from ...navigation.measurements import AbstractMeasurement, measurement_class
 from ...navigation.render import choose_binning, phase_offset_tangent, render_frame, tangent_to_roi
 from ...plotting import ellipse_xy, pyplot, saver
-from ..base import H100_SOURCE, AbstractSystem, StepCost, TraceRequest, register_system
+from ..base import H100_LAYOUT_SOURCE, AbstractSystem, StepCost, TraceRequest, register_system
 from ..impact import (
     IMPACT_BUDGET_METRICS,
     IMPACT_LABELS,
@@ -259,11 +259,23 @@ class ImpactorSystem(AbstractSystem):
     # The 15 control steps of an image interval unrolled 5 times per scan trip: measured 5 %
     # faster on the CPU (deep-impact-los, 2,000 runs on 2 cores), outcomes equal to the last bit.
     cpu_loop_shape: ClassVar[Any] = LoopShape(fence=True, unroll=5, early_exit=True)
-    # GPU: deep-impact-los on one H100 (unfenced loops, scans unrolled 4 times) took 0.14 s for
-    # 1,024 runs, 0.48 s per chunk of 125,000 and 0.98 s per chunk of 250,000: ~17 us per
-    # sequential step plus 0.46 ns per run-step.
+    # GPU: the same 5 control steps per scan trip, and the filter's mean carried through them
+    # by component (the truth already is): no stack and transpose kernels per vector and step.
+    # deep-impact-los, 125,000 runs in one chunk on an H100: 0.486 s in the accelerators'
+    # default layout (4 steps per trip, in arrays), 0.464 s at 5 steps, 0.363 s at 4 by
+    # component, 0.357 s at 5 by component, 0.399 s at 15 (no inner loop); the control
+    # step's loop body 31 -> 14 kernels, the image step's 69 -> 56 (benchmarks/gpu_loops.py
+    # --sweep, benchmarks/gpu_layout_h100.json); statuses equal and the outcomes equal to the
+    # last bit on the GPU.
+    accelerator_loop_shape: ClassVar[Any] = LoopShape(
+        fence=False, unroll=5, early_exit=False, components=True
+    )
+    # GPU: deep-impact-los on one H100 in its accelerator layout took 0.357 s for one chunk of
+    # 125,000 runs and 2.05 s for 1,000,000 in eight (the CLI's study time; the chunks queue
+    # behind one another, so the latency is paid once): ~14 us per sequential step plus
+    # 0.24 ns per run-step.
     step_costs: ClassVar[dict[str, StepCost]] = {
-        "gpu": StepCost(4.6e-10, 1.7e-5, "deep-impact-los on " + H100_SOURCE)
+        "gpu": StepCost(2.4e-10, 1.4e-5, "deep-impact-los on " + H100_LAYOUT_SOURCE)
     }
     # the compiled batch's bytes per run on the CPU (14,980); the H100's peak was 8.0 kB per run
     run_bytes: ClassVar[int] = 15_000
