@@ -229,11 +229,16 @@ def test_a_long_gpu_study_is_cut_for_progress_only_where_latency_stays_small():
     run_bytes = gj.get_system("impactor").run_bytes
     assert chunk == math.ceil(runs / math.ceil(runs / int(planner.GPU_BATCH_BYTES / run_bytes)))
     assert (cost.seconds - cost.latency_s) * chunk / runs < planner.PROGRESS_CHUNK_S
-    # bennu: 2.1 s of latency per chunk: a 90 s study is cut in 5 (the extra chunks' latency
-    # under a tenth of the estimate), not in 9 chunks of 10 s
+    # bennu: 1.5 s of latency per chunk: a 41 s study is cut in 3 (the extra chunks' latency
+    # under a tenth of the estimate), not in 4 chunks of 10 s
     chunk, cost = plan("bennu-apn", 1_000_000, H100)
-    assert cost.seconds == pytest.approx(89.7, abs=1) and math.ceil(1_000_000 / chunk) == 5
-    assert 4 * cost.latency_s < planner.LATENCY_SHARE * cost.seconds < 5 * cost.latency_s
+    model = gj.get_system("intercept").step_cost("gpu")
+    steps = cost.steps_per_run
+    assert cost.latency_s == pytest.approx(steps * model.step_latency_s)
+    assert cost.seconds == pytest.approx(1_000_000 * steps * model.run_step_s + cost.latency_s)
+    assert (cost.seconds - cost.latency_s) / planner.PROGRESS_CHUNK_S > 3.5  # 4 chunks of 10 s
+    assert math.ceil(1_000_000 / chunk) == 3
+    assert 2 * cost.latency_s < planner.LATENCY_SHARE * cost.seconds < 3 * cost.latency_s
 
 
 def test_the_chunk_size_asked_for_is_kept_on_a_gpu():

@@ -18,7 +18,7 @@ from ..._status import Status
 from ...guidance.intercept.apn import PNNavigation
 from ...guidance.intercept.base import AbstractInterceptGuidance
 from ...plotting import ellipse_xy, pyplot, saver
-from ..base import H100_SOURCE, AbstractSystem, StepCost, TraceRequest, register_system
+from ..base import H100_LAYOUT_SOURCE, AbstractSystem, StepCost, TraceRequest, register_system
 from ..impact import (
     IMPACT_BUDGET_METRICS,
     IMPACT_LABELS,
@@ -234,12 +234,13 @@ class InterceptSystem(AbstractSystem):
     }
 
     step_seconds = STEP_SECONDS
-    # GPU: bennu-apn on one H100 (unfenced loops, scans unrolled 8 times) took 2.30 s for 2,000
-    # runs and 19.8 s for 200,000 (one chunk each, through the CLI): its strictly sequential
-    # steps cost the same whatever the batch, 9.7 us per step of steps_per_run, plus 0.40 ns
+    # GPU: bennu-apn on one H100 in its accelerator layout took 1.59 s for 2,000 runs (the
+    # CLI, benchmarks/gpu_layout_h100.json) and 9.28 s for 200,000 (the API with the CLI's
+    # defaults, benchmarks/gpu_kernels_h100.json), one chunk each: its strictly sequential
+    # steps cost the same whatever the batch, 6.9 us per step of steps_per_run, plus 0.18 ns
     # per run-step.
     step_costs: ClassVar[dict[str, StepCost]] = {
-        "gpu": StepCost(4.0e-10, 9.7e-6, "bennu-apn on " + H100_SOURCE)
+        "gpu": StepCost(1.8e-10, 6.9e-6, "bennu-apn on " + H100_LAYOUT_SOURCE)
     }
     run_bytes: ClassVar[int] = 4_500  # the compiled batch's bytes per run on the CPU (4,484)
     # Latency-bound on a GPU (91,200 sequential steps for bennu-apn whatever the batch): 8
