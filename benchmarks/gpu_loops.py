@@ -133,7 +133,9 @@ def child(args):
 
 
 def sweep(items, out):
-    """``items``: ``scenario:runs:u1,u2,...``; each study unfenced at each unroll, one chunk."""
+    """``items``: ``scenario:runs:s1,s2,...``; each study at the system's GPU default and at
+    each shape (an unroll, ``c``/``a`` for by component/in arrays), one chunk, with the kernels
+    of each loop body of its compiled program."""
     import jax
     import numpy as np
     from gpu_kernels import loop_bodies
