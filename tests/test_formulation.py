@@ -9,6 +9,7 @@ checked here against brute force (per-step sampling), ``jax.jacfwd`` or the plai
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from gnc_jax._numerics import computed_once, matmul
 from gnc_jax.dynamics.impactor import tilt_direction
@@ -99,6 +100,28 @@ def test_interval_accelerometer_noise_has_the_per_step_statistics():
     # no firing: no noise
     zero = accel_noise(sigma * dt, jnp.zeros(3), jnp.ones(6))
     assert float(jnp.max(jnp.abs(jnp.concatenate(zero)))) == 0.0
+
+
+@pytest.mark.parametrize("c_k", [7.5, 0.5, 14.5, 3.3])
+def test_one_firing_step_gives_the_accelerometer_noise_a_finite_tangent(c_k):
+    """The engine on in one control step of the interval: C - B^2/A is zero in exact
+    arithmetic and rounds to either side of it. A relaxed law's throttle carries a tangent into
+    the moments; the noise's tangent must stay finite (the square root's infinite slope at zero
+    once made it NaN and poisoned a whole batch's gradient), and equal the one-step closed form:
+    all the noise acts at the one step, dr = c_k dv."""
+    u = jnp.asarray([0.3, -1.2, 0.7, 1.5, -0.4, 2.0])
+
+    def noise(throttle):
+        t2 = throttle**2
+        return jnp.concatenate(accel_noise(1e-4, jnp.stack([t2, t2 * c_k, t2 * c_k**2]), u))
+
+    value, tangent = jax.jvp(noise, (jnp.asarray(0.8),), (jnp.asarray(1.0),))
+    assert np.all(np.isfinite(np.asarray(tangent))), tangent
+    dv, ddv = 1e-4 * 0.8 * u[:3], 1e-4 * u[:3]
+    np.testing.assert_allclose(value[3:], dv, rtol=1e-12)
+    np.testing.assert_allclose(tangent[3:], ddv, rtol=1e-12)
+    np.testing.assert_allclose(value[:3], c_k * dv, rtol=1e-6, atol=1e-15)
+    np.testing.assert_allclose(tangent[:3], c_k * ddv, rtol=1e-6, atol=1e-15)
 
 
 def test_tilt_direction_has_independent_angles_of_sigma_about_two_axes():

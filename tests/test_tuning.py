@@ -120,6 +120,31 @@ def test_training_and_heldout_runs_never_overlap(monkeypatch):
     assert result.heldout["paired_runs"] == 10
 
 
+def test_a_non_finite_gradient_is_taken_as_zero_and_flagged(monkeypatch):
+    """Adam's update takes a non-finite gradient component as 0; the step says so in its
+    record and its progress line instead of following it silently."""
+    real = tune_module.TuningProblem.compiled
+
+    def poisoned(self, kind, build_fn, *args):
+        fn, compile_s = real(self, kind, build_fn, *args)
+        if not kind.startswith("adam"):
+            return fn, compile_s
+
+        def step(*a):
+            value, grad = fn(*a)
+            return value, jnp.asarray(grad).at[0].set(jnp.nan)
+
+        return step, compile_s
+
+    monkeypatch.setattr(tune_module.TuningProblem, "compiled", poisoned)
+    result = tune(toy(), "guidance.pn.n", "miss_rms", batch=4, steps=2, heldout_runs=0,
+                  check_runs=0)  # fmt: skip
+    assert [rec.get("nonfinite_gradient") for rec in result.history] == [1, 1]
+    assert result.tuned == result.initial  # the one gain never moved
+    line = tune_module.progress_line(result.history[0], result.names)
+    assert "gradient: 1 non-finite component(s) taken as 0" in line
+
+
 def test_heldout_table_is_the_hard_paired_evaluation():
     result = tune(toy(), "guidance.pn.n", "miss_rms+0.5*dv_mean", batch=8, steps=3, heldout_runs=12)
     rows = {r["metric"]: r for r in result.heldout["rows"]}

@@ -126,6 +126,9 @@ def _run_adam(
         t0 = time.perf_counter()
         value, grad = step_fn(args, theta, t_arg(s), idx, valid)
         rec = _record(problem, s, value, theta, temps[s], (s + 1) * batch, 0.0)
+        nonfinite = int(np.sum(~np.isfinite(np.asarray(grad))))
+        if nonfinite:  # taken as 0 by the update: flagged, not followed silently
+            rec["nonfinite_gradient"] = nonfinite
         theta, state = update(np.asarray(grad), state, theta)
         theta = np.asarray(theta)
         wall += time.perf_counter() - t0
@@ -223,6 +226,8 @@ def progress_line(rec: dict, names) -> str:
         line += f"  T={rec['temperature']:.3g}"
     if rec.get("heldout") is not None:
         line += f"  held-out {rec['heldout']:.6g}"
+    if rec.get("nonfinite_gradient"):
+        line += f"  gradient: {rec['nonfinite_gradient']} non-finite component(s) taken as 0"
     return line + f"  ({rec['wall_s']:.1f} s)"
 
 

@@ -20,7 +20,9 @@ class TuneResult:
         objective: the objective's spec; method: ``"adam"`` or ``"es"``.
         history: one dict per step: ``step``, ``objective`` (training batch; smooth for adam,
             hard for es), ``gains``, ``temperature``, ``runs`` (simulated so far), ``wall_s``
-            (after compilation, evaluations excluded), and ``heldout`` where evaluated.
+            (after compilation, evaluations excluded), ``heldout`` where evaluated, and
+            ``nonfinite_gradient`` (adam) where that many gradient components were not finite
+            and were taken as 0.
         heldout: the paired held-out evaluation (:func:`evaluate_heldout`), or ``None``.
         training_check: the hard objective on the first ``runs`` training runs of the start
             (``initial``), the last step (``last``) and the result (``tuned``, at

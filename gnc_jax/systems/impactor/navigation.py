@@ -2,6 +2,7 @@
 on the packed covariance, the accelerometer's noise reaching the estimate, and the filter's
 initial covariance with the attitude bias considered."""
 
+import jax
 import jax.numpy as jnp
 
 from ..._numerics import matmul
@@ -122,6 +123,25 @@ def take_image(
     return NavEstimate(x, unpack(apply_gain(p, gain.terms))), meas, gain.nis
 
 
+@jax.custom_jvp
+def _sqrt_nonnegative(x):
+    """sqrt(max(x, 0)), with slope 0 where that is 0.
+
+    C - B^2/A (:func:`accel_noise`) is zero in exact arithmetic when the engine fired in one
+    control step of the interval, and rounds to either side of zero: the square root's
+    infinite slope there made a relaxed law's tangent 0 x inf = NaN, which poisoned the
+    gradient of every batch holding such a run. The values are the plain expression's."""
+    return jnp.sqrt(jnp.maximum(x, 0.0))
+
+
+@_sqrt_nonnegative.defjvp
+def _sqrt_nonnegative_jvp(primals, tangents):
+    (x,), (dx,) = primals, tangents
+    y = _sqrt_nonnegative(x)
+    positive = y > 0.0
+    return y, jnp.where(positive, dx / (2.0 * jnp.where(positive, y, 1.0)), 0.0)
+
+
 def accel_noise(sigma_dv, moments, u):
     """The accelerometer's white noise over one image interval, as it reaches the estimate.
 
@@ -143,7 +163,7 @@ def accel_noise(sigma_dv, moments, u):
     sa = jnp.sqrt(jnp.where(ok, a, 1.0))
     dv = jnp.where(ok, sigma_dv * sa, 0.0) * u[:3]
     beta = jnp.where(ok, b / sa, 0.0)
-    gamma = jnp.sqrt(jnp.maximum(jnp.where(ok, c - beta**2, 0.0), 0.0))
+    gamma = _sqrt_nonnegative(jnp.where(ok, c - beta**2, 0.0))
     dr = sigma_dv * (beta * u[:3] + gamma * u[3:])
     return dr, dv
 
