@@ -128,8 +128,8 @@ def _sqrt_nonnegative(x):
     """sqrt(max(x, 0)), with slope 0 where that is 0.
 
     C - B^2/A (:func:`accel_noise`) is zero in exact arithmetic when the engine fired in one
-    control step of the interval, and rounds to either side of zero: the square root's
-    infinite slope there made a relaxed law's tangent 0 x inf = NaN, which poisoned the
+    control step of the interval, and rounds to either side of zero. The square root's slope
+    is infinite there: a relaxed law's tangent would be 0 x inf = NaN, and so would the
     gradient of every batch holding such a run. The values are the plain expression's."""
     return jnp.sqrt(jnp.maximum(x, 0.0))
 
