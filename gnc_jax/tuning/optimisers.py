@@ -125,11 +125,12 @@ def _run_adam(
         idx, valid = problem.padded(train_indices(s, batch, train_runs))
         t0 = time.perf_counter()
         value, grad = step_fn(args, theta, t_arg(s), idx, valid)
+        grad = np.asarray(grad)
         rec = _record(problem, s, value, theta, temps[s], (s + 1) * batch, 0.0)
-        nonfinite = int(np.sum(~np.isfinite(np.asarray(grad))))
+        nonfinite = int(np.sum(~np.isfinite(grad)))
         if nonfinite:  # taken as 0 by the update: flagged, not followed silently
             rec["nonfinite_gradient"] = nonfinite
-        theta, state = update(np.asarray(grad), state, theta)
+        theta, state = update(grad, state, theta)
         theta = np.asarray(theta)
         wall += time.perf_counter() - t0
         rec["wall_s"] = wall
