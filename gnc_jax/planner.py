@@ -10,7 +10,8 @@
   each when the study is announced; on a GPU, as large as the device's memory allows (the
   system's ``run_bytes``) and at most ``GPU_BATCH_BYTES`` per chunk (a larger batch runs no
   faster per run), split further only for a progress bar, and only as far as the latency term
-  stays under a tenth of the estimate.
+  stays under a tenth of the estimate. On Dask, a study of at least as many runs as workers
+  has at least one chunk per worker: a chunk is one worker's task.
 * **Memory** (:func:`compiled_bytes`, :func:`memory_refusal`): the compiled executable's own
   figure against ``max_memory_fraction`` of one device's memory (a GPU's allocator limit, the
   CPU's physical memory); :func:`gnc_jax.run_study` halves a batch it chose itself and refuses
@@ -152,9 +153,11 @@ def plan_chunk(
     announce: bool,
     distributed: bool,
     max_memory_fraction: float = 0.5,
+    workers: int = 1,
 ) -> int:
     """Runs per chunk: ``chunk_size`` if given, else the backend's plan (module docstring);
-    equal chunks, padded for the devices when local."""
+    equal chunks, padded for the devices when local; on ``workers`` Dask workers at least one
+    chunk per worker."""
     if backend.platform == "cpu":
         default_chunk = system.chunk_per_device * n_dev if system.chunk_per_device else 1024
         if chunk_size is None and announce:  # chunks of about 10 s: a progress bar with an ETA
@@ -165,6 +168,8 @@ def plan_chunk(
             system, runs, backend, n_dev, cost, announce, max_memory_fraction
         )
         lanes = 1
+    if distributed:  # a chunk is one worker's task: none of them idle
+        default_chunk = min(default_chunk, -(-runs // max(workers, 1)))
     chunk = min(runs, chunk_size or default_chunk)
     if chunk_size is None:  # equal chunks: the last one is not mostly padding
         chunk = -(-runs // -(-runs // chunk))

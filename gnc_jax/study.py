@@ -193,8 +193,9 @@ def run_study(
     distributed = client is not None or workers is not None
     n_dev = min(n_devices or backend.count, backend.count)
     chunk = plan_chunk(
-        system, runs, chunk_size, backend, n_dev, cost, announce, distributed, max_memory_fraction
-    )
+        system, runs, chunk_size, backend, n_dev, cost, announce, distributed, max_memory_fraction,
+        _worker_count(client, workers),
+    )  # fmt: skip
     n_chunks = -(-runs // chunk)
     bounds = [(c * chunk, min((c + 1) * chunk, runs)) for c in range(n_chunks)]
     store = _open_store(out, scenario, seed, runs, chunk, resume, overwrite)
@@ -381,6 +382,15 @@ class StudyError(RuntimeError):
     def __init__(self, message: str, errors: list):
         super().__init__(message)
         self.errors = errors
+
+
+def _worker_count(client, workers) -> int:
+    """Dask workers a study's chunks are spread over (1 when local)."""
+    if workers is not None:
+        return workers
+    if client is not None:
+        return max(len(client.nthreads()), 1)
+    return 1
 
 
 def _recorded_chunk_size(out) -> int | None:

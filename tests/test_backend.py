@@ -190,6 +190,26 @@ def test_cpu_chunks_are_the_cache_sized_ones():
     assert plan("lunar-skip-entry", 1000, fake("cpu", count=2))[0] == 500
 
 
+def test_a_dask_study_has_a_chunk_per_worker():
+    """On Dask a chunk is one worker's task: a study of one default chunk is split so that no
+    worker idles; a larger one keeps the cache-sized chunks; a chunk size given is kept."""
+    cpu = fake("cpu", count=1)
+
+    def chunk(name, runs, workers, chunk_size=None):
+        scenario = gj.load_scenario(name)
+        cost = gj.estimate_cost(scenario, runs, 1, cpu)
+        system = gj.get_system(scenario.kind)
+        return planner.plan_chunk(system, runs, chunk_size, cpu, 1, cost, False, True, 0.5, workers)
+
+    assert chunk("lunar-skip-entry", 256, 2) == 128  # one chunk of 256 per device locally
+    assert chunk("lunar-skip-entry", 257, 2) == 129  # equal chunks, the last one short
+    assert chunk("lunar-skip-entry", 256, 1) == 256
+    assert chunk("lunar-skip-entry", 3, 4) == 1
+    assert chunk("lunar-skip-entry", 2000, 2) == 250  # cache-sized: 8 chunks of 250
+    assert chunk("lunar-skip-entry", 256, 2, chunk_size=256) == 256
+    assert chunk("deep-impact-los", 2000, 2) == 1000
+
+
 @pytest.mark.parametrize(
     "name, runs",
     [("lunar-skip-entry", 100_000), ("bennu-apn", 200_000), ("bennu-apn", 2_000)],

@@ -224,6 +224,10 @@ def test_dask_cluster_equals_local_and_survives_a_lost_worker(toy, reference, cl
     study = run_study(toy, runs=RUNS, chunk_size=CHUNK, progress=False, client=cluster)
     _equal(study.outcomes, reference)
     assert study.summary()["dask_workers"] == 2
+    # the planner's chunks: one per worker (the toy's default chunk holds all RUNS runs)
+    planned = run_study(toy, runs=RUNS, progress=False, client=cluster)
+    assert planned.chunk_size == RUNS // 2
+    _equal(planned.outcomes, reference)
     # A worker dies mid-study: its chunks run again elsewhere, the study completes identically.
     out = tmp_path / "study"
     result = {}
