@@ -8,11 +8,14 @@ a factor of about 3, enough to refuse a runaway study and to size progress chunk
 
     python benchmarks/cost_calibration.py [--system impactor] [--scale 1.0]
     python benchmarks/cost_calibration.py --device gpu [--system intercept] [--scale 1.0]
+    python benchmarks/cost_calibration.py --fit --system impactor
 
-``--device gpu`` fits a system's GPU cost model (``StepCost``: seconds per run-step and per
-sequential step) from two studies of its example in one chunk each, a small and a large one
-(wall = steps x latency + runs x steps x throughput), prints the ``StepCost`` to put in the
-system's ``step_costs`` and the estimate against the measured wall for the cases above.
+``--device gpu`` (or ``--fit`` on the CPU) fits a system's cost model on that platform
+(``StepCost``: seconds per run-step and per sequential step) from two studies of its example
+in one chunk each, a small and a large one (wall = steps x latency + runs x steps x
+throughput; on the CPU the large one a chunk of the cache-sized plan), prints the
+``StepCost`` to put in the system's ``step_costs`` and the estimate against the measured wall
+for the cases above.
 """
 
 import argparse
@@ -46,11 +49,17 @@ CASES = {
 }
 
 
-GPU_CASES = {  # (scenario, small and large run count), each run in one chunk
-    "impactor": ("deep-impact-los", 2_000, 100_000),
-    "capsule": ("lunar-skip-entry", 10_000, 100_000),
-    "intercept": ("bennu-apn", 2_000, 20_000),
-    "midcourse": ("phoenix-midcourse", 200, 2_000),
+FIT_CASES = {  # platform -> (scenario, small and large run count), each run in one chunk
+    "gpu": {
+        "impactor": ("deep-impact-los", 2_000, 100_000),
+        "capsule": ("lunar-skip-entry", 10_000, 100_000),
+        "intercept": ("bennu-apn", 2_000, 20_000),
+        "midcourse": ("phoenix-midcourse", 200, 2_000),
+    },
+    "cpu": {  # the large one: a chunk of the 2-core machine's plan
+        "impactor": ("deep-impact-los", 64, 4_096),
+        "intercept": ("bennu-apn", 16, 1_000),
+    },
 }
 
 
@@ -59,7 +68,7 @@ def fit_device(system: str, device: str, scale: float):
     from gnc_jax.backend import describe, select
     from gnc_jax.systems import StepCost
 
-    name, small, large = GPU_CASES[system]
+    name, small, large = FIT_CASES[select(device).platform][system]
     scenario = gj.load_scenario(name)
     steps = gj.get_system(scenario.kind).steps_per_run(scenario.config)
     walls = []
@@ -70,8 +79,10 @@ def fit_device(system: str, device: str, scale: float):
             )
         walls.append((runs, study.wall_s))
     (n1, w1), (n2, w2) = walls
-    throughput = max((w2 - w1) / ((n2 - n1) * steps), 0.0)
-    latency = max((w1 - n1 * steps * throughput) / steps, 0.0)
+    d = select(device).count  # the model's throughput term is per device: ceil(runs / d)
+    p1, p2 = -(-n1 // d), -(-n2 // d)
+    throughput = max((w2 - w1) / ((p2 - p1) * steps), 0.0)
+    latency = max((w1 - p1 * steps * throughput) / steps, 0.0)
     kind = describe(select(device))["device_kind"]
     return StepCost(throughput, latency, f"{name} on {kind}: {n1} runs {w1:.3g} s, {n2} {w2:.3g} s")
 
@@ -81,9 +92,13 @@ def main() -> None:
     parser.add_argument("--system", choices=sorted(CASES), action="append")
     parser.add_argument("--scale", type=float, default=1.0, help="multiply every run count")
     parser.add_argument("--device", choices=("cpu", "gpu", "auto"), default="cpu")
+    parser.add_argument("--fit", action="store_true", help="fit the StepCost on the CPU too")
     args = parser.parse_args()
-    if args.device != "cpu":
-        for system in args.system or sorted(GPU_CASES):
+    if args.device != "cpu" or args.fit:
+        from gnc_jax.backend import select
+
+        cases = FIT_CASES[select(args.device).platform]
+        for system in [s for s in args.system or sorted(cases) if s in cases]:
             print(f"{system}: {fit_device(system, args.device, args.scale)!r}", flush=True)
     print(
         f"{'scenario':<24} {'overrides':<44} {'runs':>5} {'estimate s':>10} "

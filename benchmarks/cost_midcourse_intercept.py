@@ -6,7 +6,9 @@
 For each system the first scenario calibrates: step_seconds = study wall time (compilation
 excluded, best of 2) / (runs per device x steps per run). The other scenarios change what the
 model scales with (loop lengths, solver, tolerance, iterations, sensitivity, fixes) and show the
-estimate against the measured time as a ratio: the model is good to a factor of about 3.
+estimate against the measured time as a ratio: the model is good to a factor of about 3. (The
+intercept's CPU model is a throughput and a latency term, fitted by
+``benchmarks/cost_calibration.py --fit``; its printed step_seconds is the one-term figure.)
 """
 
 import argparse

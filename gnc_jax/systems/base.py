@@ -94,6 +94,9 @@ H100_SOURCE = "an H100 80GB (jax 0.11.2): benchmarks/gpu_acceptance_h100.json"
 """Where the packaged systems' GPU cost models were measured (``benchmarks/gpu_acceptance.py``,
 the capsule's in ``benchmarks/backend_probe_h100.json``; re-measure with
 ``benchmarks/cost_calibration.py --device gpu``)."""
+CPU_SOURCE = "the 2-core development machine, 2 host devices: benchmarks/cost_calibration.py --fit"
+"""Where the packaged systems' CPU cost models with a latency term were fitted (a small and a
+chunk-sized study of each example; re-measure with ``benchmarks/cost_calibration.py --fit``)."""
 H100_LAYOUT_SOURCE = "an H100 80GB (jax 0.11.2): benchmarks/gpu_layout_h100.json"
 """Where a GPU cost model measured in a system's own accelerator layout was taken
 (``benchmarks/gpu_loops.py --sweep`` and the CLI)."""

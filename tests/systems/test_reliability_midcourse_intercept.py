@@ -83,9 +83,10 @@ def test_a_runaway_study_is_refused_by_its_cost_before_compilation(name, overrid
 def test_cost_estimates_are_finite_and_positive_for_the_examples(name):
     cost = estimate_cost(scenario(name, {}), runs=1000)
     assert cost.steps_per_run > 0 and math.isfinite(cost.seconds)
-    # the measured step time (benchmarks/cost_midcourse_intercept.py) puts a 1000-run study of
-    # the cheap examples between a second and ten minutes on two cores
-    assert 1.0 < cost.seconds < 600.0
+    # the measured cost models (benchmarks/cost_calibration.py --fit for the intercept,
+    # benchmarks/cost_midcourse_intercept.py for the midcourse) put a 1000-run study of the
+    # short examples between 0.05 s and ten minutes on two cores
+    assert 0.05 < cost.seconds < 600.0
 
 
 def test_target_elements_inside_the_sun_are_refused_in_one_line():

@@ -25,7 +25,14 @@ from ...navigation.centroid import extract_centroid
 from ...navigation.measurements import AbstractMeasurement, measurement_class
 from ...navigation.render import choose_binning, phase_offset_tangent, render_frame, tangent_to_roi
 from ...plotting import ellipse_xy, pyplot, saver
-from ..base import H100_LAYOUT_SOURCE, AbstractSystem, StepCost, TraceRequest, register_system
+from ..base import (
+    CPU_SOURCE,
+    H100_LAYOUT_SOURCE,
+    AbstractSystem,
+    StepCost,
+    TraceRequest,
+    register_system,
+)
 from ..impact import (
     IMPACT_BUDGET_METRICS,
     IMPACT_LABELS,
@@ -246,10 +253,10 @@ class ImpactorSystem(AbstractSystem):
         "guidance.predictive.burn_times_s": [150.0, 450.0, 660.0],
     }
 
-    # Cost model (benchmarks/cost_calibration.py): a control step costs ~1.1 us on one core;
-    # an image costs IMAGE_STEPS control steps with the Gaussian front end and, with rendered
-    # frames, more in proportion to the rays traced and the labelling sweeps.
-    step_seconds: ClassVar[float] = 1.1e-6
+    # Cost model (benchmarks/cost_calibration.py): steps_per_run counts an image as
+    # IMAGE_STEPS control steps with the Gaussian front end and, with rendered frames, more in
+    # proportion to the rays traced and the labelling sweeps; step_costs gives each platform's
+    # seconds per run-step and per sequential step.
     # Measured on deep-impact-los, 2 devices (benchmarks/closed_loops.py): 1024 runs per call
     # (512 per device) 427 us per run, 4096 (2048 per device) 334, 8192 350; on one device
     # 512 runs 635 us, 1024-2048 560, 4096 578 (a device's batch below ~1000 runs pays the
@@ -274,15 +281,21 @@ class ImpactorSystem(AbstractSystem):
     # 125,000 runs and 2.05 s for 1,000,000 in eight (the CLI's study time; the chunks queue
     # behind one another, so the latency is paid once): ~14 us per sequential step plus
     # 0.24 ns per run-step.
+    # CPU: deep-impact-los on the 2-core development machine (2 host devices), one chunk each:
+    # 64 runs 0.0252 s, 4096 runs 0.745 s (benchmarks/cost_calibration.py --fit): 44 ns per
+    # run-step on a device plus 1.7 us per sequential step.
     step_costs: ClassVar[dict[str, StepCost]] = {
-        "gpu": StepCost(2.4e-10, 1.4e-5, "deep-impact-los on " + H100_LAYOUT_SOURCE)
+        "gpu": StepCost(2.4e-10, 1.4e-5, "deep-impact-los on " + H100_LAYOUT_SOURCE),
+        "cpu": StepCost(4.4e-8, 1.7e-6, "deep-impact-los on " + CPU_SOURCE),
     }
     # the compiled batch's bytes per run on the CPU (14,980); the H100's peak was 8.0 kB per run
     run_bytes: ClassVar[int] = 15_000
     # 10,000 runs in 3 equal chunks: 1667 runs per device 396-428 us per run, 1668 261
     vector_lanes: ClassVar[int] = 8
     IMAGE_STEPS: ClassVar[float] = 2.0
-    RENDER_STEPS: ClassVar[float] = 230.0  # per image, at the default camera (32 rays, ROI 32)
+    # per image, at the default camera (32 rays, ROI 32): deep-impact-los with rendered frames,
+    # 40 runs on the 2-core machine, 1.1 s
+    RENDER_STEPS: ClassVar[float] = 880.0
 
     def steps_per_run(self, config):
         p = ImpactorParams.of(config)

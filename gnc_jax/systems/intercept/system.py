@@ -18,7 +18,14 @@ from ..._status import Status
 from ...guidance.intercept.apn import PNNavigation
 from ...guidance.intercept.base import AbstractInterceptGuidance
 from ...plotting import ellipse_xy, pyplot, saver
-from ..base import H100_LAYOUT_SOURCE, AbstractSystem, StepCost, TraceRequest, register_system
+from ..base import (
+    CPU_SOURCE,
+    H100_LAYOUT_SOURCE,
+    AbstractSystem,
+    StepCost,
+    TraceRequest,
+    register_system,
+)
 from ..impact import (
     IMPACT_BUDGET_METRICS,
     IMPACT_LABELS,
@@ -190,13 +197,6 @@ def intercept_figures(summary, runs, scenario, out: pathlib.Path, traces) -> lis
     return files
 
 
-STEP_SECONDS = 3.6e-6
-"""Wall seconds of one guidance step per device, measured by
-``benchmarks/cost_midcourse_intercept.py`` (bennu-apn with the test overrides, 2 devices on
-the 2-core development machine; the model is within 0.8-1.4x of the measured time over the
-coast, image interval and navigation model)."""
-
-
 def intercept_steps(config: dict) -> float:
     """Cost of one intercept run (:meth:`InterceptSystem.steps_per_run`) in guidance steps of
     the EKF loop: the guidance steps (a step with perfect navigation costs 0.4 of one), the LOS
@@ -233,14 +233,18 @@ class InterceptSystem(AbstractSystem):
         "navigation.knowledge_position_km": [2.0, 0.2, 0.2],
     }
 
-    step_seconds = STEP_SECONDS
     # GPU: bennu-apn on one H100 in its accelerator layout took 1.59 s for 2,000 runs (the
     # CLI, benchmarks/gpu_layout_h100.json) and 9.28 s for 200,000 (the API with the CLI's
     # defaults, benchmarks/gpu_kernels_h100.json), one chunk each: its strictly sequential
     # steps cost the same whatever the batch, 6.9 us per step of steps_per_run, plus 0.18 ns
     # per run-step.
+    # CPU: bennu-apn on the 2-core development machine (2 host devices), one chunk each: 16
+    # runs 0.334 s, 1000 runs 4.22 s (benchmarks/cost_calibration.py --fit): 36 ns per
+    # run-step on a device plus 1.2 us per sequential step; the estimate within 1.0-1.1x of
+    # the measured wall over the calibration's cases.
     step_costs: ClassVar[dict[str, StepCost]] = {
-        "gpu": StepCost(1.8e-10, 6.9e-6, "bennu-apn on " + H100_LAYOUT_SOURCE)
+        "gpu": StepCost(1.8e-10, 6.9e-6, "bennu-apn on " + H100_LAYOUT_SOURCE),
+        "cpu": StepCost(3.6e-8, 1.24e-6, "bennu-apn on " + CPU_SOURCE),
     }
     run_bytes: ClassVar[int] = 4_500  # the compiled batch's bytes per run on the CPU (4,484)
     # Latency-bound on a GPU (91,200 sequential steps for bennu-apn whatever the batch): 8
