@@ -6,7 +6,7 @@ For the paper scenario and off-nominal variants, prints the reference-design tim
 a cache miss designs; a hit only loads), the compile time, the study's wall time after
 compilation, ``CapsuleSystem.steps_per_run`` and the step time it implies
 (wall x devices / runs / steps), and the ratio of the current estimate (``estimate_cost``,
-from ``CapsuleSystem.step_seconds``) to the measured wall time.
+from the capsule's CPU ``StepCost``) to the measured wall time.
 """
 
 import argparse

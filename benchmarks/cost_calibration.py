@@ -59,6 +59,7 @@ FIT_CASES = {  # platform -> (scenario, small and large run count), each run in 
     "cpu": {  # the large one: a chunk of the 2-core machine's plan
         "impactor": ("deep-impact-los", 64, 4_096),
         "intercept": ("bennu-apn", 16, 1_000),
+        "capsule": ("lunar-skip-entry", 16, 512),
     },
 }
 

@@ -5,6 +5,7 @@ and CMA-ES (the ``cma`` package) on the hard logic.
     python benchmarks/tune_schedule.py [--batch 64] [--steps 30] [--heldout 2000]
         [--eval-every 2] [--eval-runs 256] [--methods adam,es,cma] [--population 4]
         [--check-runs 256] [--setup los|skip-entry|skip-entry-gains] [--breakpoints 0,...]
+        [--learning-rate 0.1] [--sigma 0.1]
 
 ``deep-impact-los`` with k1 and k2 scheduled over time to go at 8 breakpoints each (16
 knots), starting from the packaged constant gains (4, 1) at every knot (the same flight as
@@ -64,6 +65,8 @@ def main():
     ap.add_argument("--check-runs", type=int, default=256)
     ap.add_argument("--setup", choices=tuple(SETUPS), default="los")
     ap.add_argument("--breakpoints", help="the schedule's breakpoints, comma-separated")
+    ap.add_argument("--learning-rate", type=float, default=0.1, help="Adam's and the ES's")
+    ap.add_argument("--sigma", type=float, default=0.1, help="the ES's and CMA-ES's step")
     args = ap.parse_args()
     name, field, breakpoints, params, objective = SETUPS[args.setup]
     if args.breakpoints:
@@ -76,6 +79,7 @@ def main():
             scenario, params, objective, batch=args.batch, steps=args.steps, seed=0,
             method=method, heldout_runs=args.heldout, eval_every=args.eval_every,
             eval_runs=args.eval_runs, population=args.population, check_runs=args.check_runs,
+            learning_rate=args.learning_rate, sigma=args.sigma,
         )  # fmt: skip
         results[method] = r
         row = r.heldout["rows"][0]

@@ -18,7 +18,14 @@ import numpy as np
 from ..._status import Status
 from ...guidance.entry.base import AbstractEntryGuidance
 from ...params import from_scenario
-from ..base import H100_SOURCE, AbstractSystem, StepCost, TraceRequest, register_system
+from ..base import (
+    CPU_SOURCE,
+    H100_SOURCE,
+    AbstractSystem,
+    StepCost,
+    TraceRequest,
+    register_system,
+)
 from . import simulation as capsule_sim
 from .envelope import LOAD_LIMIT_G, check_cells, draw_overlay
 from .figures import capsule_figures
@@ -31,8 +38,6 @@ from .sources import BUDGET_METRICS, ERROR_SOURCES, SOURCE_GROUPS
 # law's predictions per corrector cycle: its family's prediction_steps).
 MEAN_SPEED_FRACTION = 0.58  # chute range / (flight time x entry speed): 8000 km in 1250 s at 11
 FIRST_ENTRY_FRACTION = 0.16  # corrector-active first entry over the flight: (229 - 34) / 1250 s
-STEP_SECONDS = 1.5e-6  # s per step and device (benchmarks/capsule_cost.py): 0.6e-6 on the paper
-# scenario (256 runs in 0.69 s on 2 devices), 2.8e-6 and 3.4e-6 at 5000 and 2500 km
 
 
 def _interval(x: np.ndarray) -> dict[str, Any]:
@@ -134,8 +139,6 @@ class CapsuleSystem(AbstractSystem):
     """Default load limit of the corridor's undershoot boundary (``gnc-jax envelope
     --load-limit-g`` changes it)."""
 
-    # measured with benchmarks/capsule_cost.py (wall s x devices / runs / steps)
-    step_seconds = STEP_SECONDS
     # measured with benchmarks/capsule.py (per-run time against the chunk size): the lowest
     # per-run time is at 256 runs per device, whose working set (about 2 kB per run of
     # live buffers, the compiled chunk's temp memory) half fills a 1 MB L2 cache
@@ -143,8 +146,13 @@ class CapsuleSystem(AbstractSystem):
     # GPU: lunar-skip-entry on one H100 (a guidance cycle unrolled whole, the corrector's
     # predictor steps masked) took 0.51 s for 512 runs and 1.34 s for 100,000 (one chunk
     # each): 76 us per sequential step plus 1.25 ns per run-step.
+    # CPU: lunar-skip-entry on the 2-core development machine (2 host devices), one chunk
+    # each: 16 runs 0.215 s, 512 runs 1.91 s (benchmarks/cost_calibration.py --fit): 1.03 us
+    # per run-step on a device plus 24 us per sequential step (a small batch still pays for
+    # the corrector rounds of its slowest run).
     step_costs: ClassVar[dict[str, StepCost]] = {
-        "gpu": StepCost(1.25e-9, 7.6e-5, "lunar-skip-entry on " + H100_SOURCE)
+        "gpu": StepCost(1.25e-9, 7.6e-5, "lunar-skip-entry on " + H100_SOURCE),
+        "cpu": StepCost(1.03e-6, 2.4e-5, "lunar-skip-entry on " + CPU_SOURCE),
     }
     run_bytes: ClassVar[int] = 2_500  # the compiled batch's bytes per run on the CPU (2,476)
 
@@ -163,7 +171,7 @@ class CapsuleSystem(AbstractSystem):
         of the first entry (about ``FIRST_ENTRY_FRACTION`` of the flight) costs the law's
         :meth:`~gnc_jax.guidance.entry.base.AbstractEntryGuidance.prediction_steps`. The
         fractions are those of the paper scenario (256 runs: flight 1250 s, guidance
-        34-229 s); the estimate is within about x3 on the off-nominal cases of
+        34-229 s); the estimate is within 0.6-1.6x of the measured time on the cases of
         ``benchmarks/capsule_cost.py``.
         """
         e = from_scenario(Entry, config)
