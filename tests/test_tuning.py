@@ -265,6 +265,47 @@ def test_bad_tune_input_is_one_line_before_compilation(
     assert message in err and "allowed" in err
 
 
+@pytest.mark.parametrize(
+    "kw,message",
+    [
+        (dict(sigma=0.0), "sigma: 0.0; allowed: a number > 0"),
+        (dict(sigma=float("nan")), "sigma: nan"),
+        (dict(learning_rate=-0.1), "learning_rate: -0.1; allowed: a number > 0"),
+    ],
+)
+def test_a_bad_step_is_refused_before_compilation(kw, message, monkeypatch):
+    def no_compile(*a, **k):
+        raise AssertionError("compiled despite bad input")
+
+    monkeypatch.setattr(tune_module.problem, "batch_function", no_compile)
+    with pytest.raises(ScenarioError) as e:
+        tune(toy(), "guidance.pn.n", "miss_rms", method="es", **kw)
+    assert message in str(e.value) and len(str(e.value).splitlines()) == 1
+
+
+@pytest.mark.parametrize("option", ["--sigma", "--population", "--learning-rate"])
+def test_a_bad_cli_step_is_one_line(option, capsys, tmp_path):
+    with pytest.raises(SystemExit) as e:
+        cli.main(["tune", TOY, "--out", str(tmp_path), "--params", "guidance.pn.n", option, "0"])
+    err = capsys.readouterr().err.strip()
+    assert e.value.code == 2 and len(err.splitlines()) == 1
+    assert f"{option}: '0'; allowed" in err
+
+
+def test_the_cli_passes_the_gradient_free_step_and_population(monkeypatch, tmp_path):
+    seen = {}
+
+    def fake_tune(scenario, names, objective, **kw):
+        seen.update(kw)
+        raise ScenarioError("stop here; allowed: nothing")
+
+    monkeypatch.setattr(tune_module, "tune", fake_tune)
+    args = ["--params", "guidance.pn.n", "--method", "cma", "--sigma", "0.3"]
+    code = cli.main(["tune", TOY, "--out", str(tmp_path), *args, "--population", "3"])
+    assert code == 2
+    assert (seen["method"], seen["sigma"], seen["population"]) == ("cma", 0.3, 3)
+
+
 def test_a_non_tunable_law_field_names_the_tunable_ones():
     with pytest.raises(ScenarioError) as e:
         resolve_gains(gj.load_scenario("deep-impact-los"), ["guidance.los.temperature"])

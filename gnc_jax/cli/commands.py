@@ -257,6 +257,8 @@ def cmd_tune(args) -> int:
         method=args.method,
         gradient=args.mode,
         learning_rate=args.learning_rate,
+        sigma=args.sigma,
+        population=args.population,
         heldout_runs=args.heldout,
         eval_every=args.eval_every,
         eval_runs=args.eval_runs,

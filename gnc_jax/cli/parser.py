@@ -205,7 +205,19 @@ def _add_tune(sub) -> None:
         "--learning-rate",
         type=_number("--learning-rate", float, lambda v: 0 < v < float("inf"), "a number > 0"),
         default=0.1,
-        help="Adam step in log-gain units (default 0.1: 10 %%)",
+        help="step of Adam and of the ES's Adam in log-gain units (default 0.1: 10 %%)",
+    )
+    q.add_argument(
+        "--sigma",
+        type=_number("--sigma", float, lambda v: 0 < v < float("inf"), "a number > 0"),
+        default=0.1,
+        help="es and cma: the perturbation (CMA-ES's initial step) in log-gain units (default 0.1)",
+    )
+    q.add_argument(
+        "--population",
+        type=_positive_int("--population"),
+        default=4,
+        help="es: antithetic pairs per step; cma: half the candidates per generation",
     )
     q.add_argument(
         "--heldout",

@@ -4,6 +4,7 @@ the held-out evaluation of the result."""
 import dataclasses
 import importlib.util
 from collections.abc import Callable
+from math import inf
 
 import jax.numpy as jnp
 import numpy as np
@@ -103,7 +104,7 @@ def tune(
         scenario = scenario.with_overrides(overrides)
     train_runs = _checked_sizes(
         batch, steps, seed, method, gradient, train_runs, heldout_runs, eval_every, eval_runs,
-        population, check_runs, check_every,
+        population, check_runs, check_every, learning_rate, sigma,
     )  # fmt: skip
     scenario = with_schedule_starts(scenario, params)
     gains = resolve_gains(scenario, params)
@@ -151,10 +152,11 @@ def tune(
 
 def _checked_sizes(
     batch, steps, seed, method, gradient, train_runs, heldout_runs, eval_every, eval_runs,
-    population, check_runs, check_every,
+    population, check_runs, check_every, learning_rate, sigma,
 ) -> int:  # fmt: skip
-    """The training set's size (default ``batch * steps``) once every size, the seed, the
-    method and the gradient mode are checked; :class:`ScenarioError` naming the first bad one."""
+    """The training set's size (default ``batch * steps``) once every size, the steps
+    (``learning_rate``, ``sigma``), the seed, the method and the gradient mode are checked;
+    :class:`ScenarioError` naming the first bad one."""
     for name, value, least in (
         ("batch", batch, 1),
         ("steps", steps, 1),
@@ -167,6 +169,9 @@ def _checked_sizes(
     ):
         if isinstance(value, bool) or not isinstance(value, int) or value < least:
             raise ScenarioError(f"{name}: {value!r}; allowed: an integer >= {least}")
+    for name, value in (("learning_rate", learning_rate), ("sigma", sigma)):
+        if isinstance(value, bool) or not isinstance(value, int | float) or not 0 < value < inf:
+            raise ScenarioError(f"{name}: {value!r}; allowed: a number > 0")
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**32:
         raise ScenarioError(f"seed: {seed!r}; allowed: an integer in [0, 2^32)")
     if method not in ("adam", "es", "cma"):
