@@ -268,9 +268,10 @@ def test_bad_tune_input_is_one_line_before_compilation(
 @pytest.mark.parametrize(
     "kw,message",
     [
-        (dict(sigma=0.0), "sigma: 0.0; allowed: a number > 0"),
+        (dict(sigma=0.0), "sigma: 0.0; allowed: a finite number > 0"),
         (dict(sigma=float("nan")), "sigma: nan"),
-        (dict(learning_rate=-0.1), "learning_rate: -0.1; allowed: a number > 0"),
+        (dict(learning_rate=-0.1), "learning_rate: -0.1; allowed: a finite number > 0"),
+        (dict(sigma="0.1"), "sigma: '0.1'"),
     ],
 )
 def test_a_bad_step_is_refused_before_compilation(kw, message, monkeypatch):

@@ -5,6 +5,7 @@ import dataclasses
 import importlib.util
 from collections.abc import Callable
 from math import inf
+from numbers import Real
 
 import jax.numpy as jnp
 import numpy as np
@@ -170,8 +171,8 @@ def _checked_sizes(
         if isinstance(value, bool) or not isinstance(value, int) or value < least:
             raise ScenarioError(f"{name}: {value!r}; allowed: an integer >= {least}")
     for name, value in (("learning_rate", learning_rate), ("sigma", sigma)):
-        if isinstance(value, bool) or not isinstance(value, int | float) or not 0 < value < inf:
-            raise ScenarioError(f"{name}: {value!r}; allowed: a number > 0")
+        if isinstance(value, bool) or not isinstance(value, Real) or not 0 < value < inf:
+            raise ScenarioError(f"{name}: {value!r}; allowed: a finite number > 0")
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**32:
         raise ScenarioError(f"seed: {seed!r}; allowed: an integer in [0, 2^32)")
     if method not in ("adam", "es", "cma"):
