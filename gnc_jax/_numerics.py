@@ -233,6 +233,26 @@ def using_loop_shape(shape: LoopShape | None):
         _LOOP_SHAPE.reset(token)
 
 
+_LANES: contextvars.ContextVar = contextvars.ContextVar("lanes_per_device", default=None)
+
+
+@contextlib.contextmanager
+def using_lanes(lanes: int | None):
+    """Trace inside the block for a batch of ``lanes`` runs per device (``None``: unknown), so
+    that a loop may lay itself out for it (:func:`lanes_per_device`)."""
+    token = _LANES.set(lanes)
+    try:
+        yield
+    finally:
+        _LANES.reset(token)
+
+
+def lanes_per_device() -> int | None:
+    """The runs per device of the batch being traced, where the caller says
+    (:func:`using_lanes`: a study's compiled chunk); ``None`` when unknown."""
+    return _LANES.get()
+
+
 def computed_once(fn, live, *args, adjoint=None):
     """``fn(*args)``, computed once into memory before its consumers run.
 
@@ -409,6 +429,7 @@ __all__ = [
     "dot3",
     "explicit_loop_shape",
     "for_platform",
+    "lanes_per_device",
     "loop_shape",
     "matmul",
     "matvec3",
@@ -418,5 +439,6 @@ __all__ = [
     "vector3",
     "smooth_norm",
     "sub3",
+    "using_lanes",
     "using_loop_shape",
 ]

@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, PartitionSpec
 
-from ._numerics import explicit_loop_shape, for_platform, using_loop_shape
+from ._numerics import explicit_loop_shape, for_platform, using_lanes, using_loop_shape
 from ._random import DrawPlan, plan_key, run_key
 from .backend import Backend, placement, require, select
 from .planner import (
@@ -111,7 +111,7 @@ def _compile(system, fn, where, sim, law, seed_arr, chunk):
     if key in _COMPILED:
         return _COMPILED[key], 0.0
     t0 = time.perf_counter()
-    with using_loop_shape(shape):
+    with using_loop_shape(shape), using_lanes(chunk // len(where[0])):
         compiled = fn.lower(sim, law, seed_arr, jnp.arange(chunk)).compile()
     compile_s = time.perf_counter() - t0
     if len(_COMPILED) >= 32:
