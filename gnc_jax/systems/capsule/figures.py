@@ -135,6 +135,8 @@ def capsule_figures(summary, runs, scenario, out: pathlib.Path, traces) -> list[
     ok = runs["status"] == Status.ok
     dr, cr = runs["downrange_err_km"][ok], runs["crossrange_err_km"][ok]
     save(_chute_scatter(plt, summary, scenario, dr, cr), "chute_scatter.png")
+    if not ok.any():  # the other figures draw ok runs only: a failed study gets the scatter
+        return files
     save(_predictions(plt, runs, ok, scenario), "predictions.png")
     save(_miss_against_ld(plt, runs, ok, scenario, dr, cr), "miss_vs_ld.png")
     _, tr = traces["ok_runs"]

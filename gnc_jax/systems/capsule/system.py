@@ -237,8 +237,9 @@ class CapsuleSystem(AbstractSystem):
         return _capsule_statistics(outcomes, ok)
 
     def figure_traces(self, summary, runs, scenario):
-        ok = runs["status"] == Status.ok
-        return {"ok_runs": TraceRequest(tuple(np.flatnonzero(ok).tolist()), every=5)}
+        ok = np.flatnonzero(runs["status"] == Status.ok)
+        # no ok run: nothing to fly again (the trace figures are left out)
+        return {"ok_runs": TraceRequest(tuple(ok.tolist()), every=5)} if len(ok) else {}
 
     def figures(self, summary, runs, scenario, out, traces=None):
         return capsule_figures(summary, runs, scenario, out, traces)

@@ -185,6 +185,16 @@ def test_capsule_report_writes_the_paper_figures(capsule_scenario, tmp_path):
         "bank_histories.png",
     }
     assert all((tmp_path / n).stat().st_size > 10_000 for n in names)
+    # a study without an ok run: no run to fly again, the scatter of none (not a crash)
+    from gnc_jax._status import Status
+    from gnc_jax.results import load_results
+    from gnc_jax.systems.capsule.figures import capsule_figures
+
+    summary, runs, scenario = load_results(tmp_path)
+    runs = dict(runs, status=np.full_like(runs["status"], Status.missed))
+    assert capsule_scenario.system.figure_traces(summary, runs, scenario) == {}
+    files = capsule_figures(summary, runs, scenario, tmp_path, {})
+    assert [p.name for p in files] == ["chute_scatter.png"]
 
 
 @pytest.mark.slow
