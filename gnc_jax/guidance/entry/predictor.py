@@ -263,13 +263,14 @@ FENCE_MIN_LANES = 96
 
 
 def _once(law):
-    """:func:`~gnc_jax._numerics.computed_once` for the predictor step, or the plain call for
-    a batch known to be smaller than ``FENCE_MIN_LANES`` runs per device. The fence's live
-    value is one of the law's parameters: a runtime scalar shared by the batch, as a fence
-    needs, because the law is an argument of a study's compiled function (a law closed over
-    as a constant folds the fence away: the same values, left to fusion)."""
+    """:func:`~gnc_jax._numerics.computed_once` for the predictor step of a batch known to
+    have at least ``FENCE_MIN_LANES`` runs per device (a study's chunk); else the plain call
+    (a batch of unknown size, e.g. a tuning step's: left as it was). The fence's live value
+    is one of the law's parameters: a runtime scalar shared by the batch, as a fence needs,
+    because the law is an argument of a study's compiled function (a law closed over as a
+    constant folds the fence away: the same values, left to fusion)."""
     lanes = lanes_per_device()
-    if lanes is not None and lanes < FENCE_MIN_LANES:
+    if lanes is None or lanes < FENCE_MIN_LANES:
         return lambda fn, *args: fn(*args)
     return lambda fn, *args: computed_once(fn, law.kepler_load_g, *args)
 
