@@ -14,8 +14,10 @@ class Status(enum.IntEnum):
     skip_out = 2  # capsule: skipped out of the atmosphere
     no_convergence = 3  # an iteration (corrector, targeter) did not converge
     time_out = 4  # the run did not reach its terminal condition in the allotted time
-    out_of_domain = 5  # the state left the model's domain (e.g. a miss larger than the range)
-    propellant = 6  # the engine needed more propellant than the vehicle carries
+    out_of_domain = 5  # the state left the model's domain (intercept: a B-plane miss larger
+    # than the initial range, a run that ends farther from the target than it started)
+    propellant = 6  # the engine needed more propellant than the vehicle carries (impactor and
+    # intercept: spacecraft.propellant_kg)
     nav_lost = 7  # navigation lost the target (most images unused, or innovations persistently
     # beyond their covariance: see gnc_jax.navigation.ekf.NAV_LOST_*)
     missed = 8  # the run ended outside its delivery tolerance (capsule: a chute point beyond

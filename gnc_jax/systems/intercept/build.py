@@ -109,6 +109,7 @@ def build(scenario) -> PNSimulation:
         context=context,
         dynamics=dynamics,
         engine=engine,
+        propellant_kg=sc.propellant_kg,
         errors=p.errors,
         process_noise_m2s3=nv.process_noise_m2s3,
         model_attitude_rad=(

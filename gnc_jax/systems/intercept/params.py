@@ -111,6 +111,14 @@ class Spacecraft(eqx.Module):
     """``[spacecraft]``: mass and the pulsed engine."""
 
     mass_kg: Scalar = _spacecraft(372.0, lo=0.0, lo_open=True, hi=1e5, units="kg", doc="seed 000")
+    propellant_kg: Scalar = _spacecraft(
+        25.0,
+        lo=0.0,
+        hi=1e5,
+        units="kg",
+        doc="usable propellant, less than mass_kg (not in the paper: seed 000's 25 kg, 157 m/s "
+        "at 230 s on 372 kg); a run that burns more is flagged 'propellant'",
+    )
     thrust_n: Scalar = _spacecraft(88.0, lo=0.0, lo_open=True, hi=1e4, units="N", doc="seed 000")
     isp_s: Scalar = _spacecraft(
         230.0, lo=10.0, hi=1e4, units="s", doc="specific impulse; >= 10 s: a thruster"

@@ -135,8 +135,10 @@ def finish(
     draws: InterceptDraws,
     state: LoopState,
 ) -> PNOutcome:
-    """The coast to the B-plane and the outcome: ``time_out`` when the B-plane is not reached
-    ahead, ``nan`` when a field is not finite."""
+    """The coast to the B-plane and the outcome: ``nan`` when a field is not finite, else
+    ``out_of_domain`` when the B-plane miss exceeds the initial range (the run ends farther
+    from the target than it started: no intercept), ``time_out`` when the B-plane is not
+    reached ahead, ``propellant`` when the run burned more than ``sim.propellant_kg``."""
     truth, tally = state.truth, state.tally
     b, t_rest = coast_to_b_plane(sim.dynamics, truth, sim.c_bi, sim.coast_steps)
     nav_r = truth.r if sim.nav_model == "perfect" else state.estimate.r_hat
@@ -163,7 +165,12 @@ def finish(
         ),
     )
     # ``not (t_rest > 0)`` rather than ``t_rest <= 0``: a NaN coast time is a time-out too.
-    return with_status(outcome, [(~(t_rest > 0.0), Status.time_out)])
+    failures = (
+        (outcome.miss_m > sim.context.range0_m, Status.out_of_domain),
+        (~(t_rest > 0.0), Status.time_out),
+        (outcome.fuel_kg > sim.propellant_kg, Status.propellant),
+    )
+    return with_status(outcome, failures)
 
 
 def simulate(

@@ -22,6 +22,7 @@ class PNSimulation(eqx.Module):
     Attributes:
         y0: nominal initial truth (target heliocentric, impactor relative, mass).
         context: on-board data of the law; dynamics: true force model; engine: true engine.
+        propellant_kg: usable propellant (a run that burns more is flagged ``propellant``).
         errors: 1-sigma error sources; process_noise_m2s3: filter white-acceleration density.
         model_attitude_rad: the LOS angle noise the filter assumes (``errors.attitude_rad``
             unless ``navigation.model_attitude_urad`` is set).
@@ -37,6 +38,7 @@ class PNSimulation(eqx.Module):
     context: PNGuidanceContext
     dynamics: InterceptDynamics
     engine: Engine
+    propellant_kg: Scalar
     errors: PNErrors
     process_noise_m2s3: Scalar
     model_attitude_rad: Scalar

@@ -168,3 +168,33 @@ def test_reverse_mode_through_the_checkpointed_loop_matches_forward_mode():
     forward = np.asarray(jax.jit(jax.jacfwd(f, 1))(problem.args, theta))
     assert np.all(np.isfinite(forward)) and np.all(forward != 0.0)
     np.testing.assert_allclose(reverse, forward, rtol=1e-8)
+
+
+def test_a_run_out_of_its_domain_or_beyond_its_propellant_is_flagged():
+    """The final coast and outcome of a loop state: a B-plane miss beyond the initial range is
+    ``out_of_domain``, more fuel burned than ``spacecraft.propellant_kg`` is ``propellant``,
+    and the unguided approach itself (10 km off) is ``ok``."""
+    import equinox as eqx
+
+    from gnc_jax.systems.intercept.simulation import finish, start
+
+    scenario = gj.load_scenario("bennu-apn", overrides=SHORT + ["navigation.model=perfect"])
+    sim, law = gj.build(scenario)
+    key = gj.run_key(0, 0)
+    state, draws = start(sim, law, key)
+    truth = state.truth
+    range0 = float(jnp.linalg.norm(truth.r))
+    side = jnp.cross(truth.v, jnp.array([0.0, 0.0, 1.0]))
+    side = side / jnp.linalg.norm(side)
+    propellant = scenario.config["spacecraft"]["propellant_kg"]
+    cases = [
+        (truth, gj.Status.ok),
+        (truth._replace(r=truth.r + 1.5 * range0 * side), gj.Status.out_of_domain),
+        (truth._replace(m=truth.m - 1.01 * propellant), gj.Status.propellant),
+    ]
+    outcome = eqx.filter_jit(finish)
+    for flown, status in cases:
+        out = outcome(sim, law, key, draws, state._replace(truth=flown))
+        assert int(out.status) == status, gj.Status.name_of(int(out.status))
+        assert (float(out.miss_m) > range0) == (status == gj.Status.out_of_domain)
+        assert (float(out.fuel_kg) > propellant) == (status == gj.Status.propellant)
