@@ -81,6 +81,30 @@ BAD_INPUT += [
         "approach.impactor_velocity_kmps: the impactor must close",
     ),
     (["run", APN, "--set", "navigation.knowledge_position_km=[1.0, 2.0]"], "expected 3 numbers"),
+    # 900 s images: 102 of them end the loop at 91800 s, past the B-plane at 91799.8 s
+    (
+        ["run", APN, "--set", "navigation.image_interval_s=900"],
+        "navigation.image_interval_s: 900 s is longer than guidance.coast_s = 600 s",
+    ),
+    (
+        ["run", APN, "--set", "guidance.dt_s=60", "--set", "guidance.coast_s=30"],
+        "guidance.dt_s: 60 s is longer than guidance.coast_s = 30 s",
+    ),
+    (["run", APN, "--set", "guidance.apn.n_min=0"], "guidance.apn.n_min: 0 is out of range"),
+    (["run", APN, "--set", "guidance.apn.n_min=1.9"], "allowed: a number in [2, 100]"),
+    (
+        ["run", APN, "--set", "spacecraft.mass_kg=0.003"],
+        "spacecraft.propellant_kg: 25 kg is not less than spacecraft.mass_kg = 0.003 kg",
+    ),
+    (
+        ["run", APN, "--set", "approach.impactor_position_km=[1.34175e8, 0.4, 0.0]"],
+        "approach.impactor_position_km: 400 m from the target's centre; allowed: more than 2",
+    ),
+    # 1.7e9 km at 10.2 km/s: 5.3 years
+    (
+        ["run", APN, "--set", "approach.impactor_position_km=[1.34176e8, 1.7e9, 0.0]"],
+        "time of flight 1929 days (range / closing speed); allowed: at most 30 days",
+    ),
 ]
 
 

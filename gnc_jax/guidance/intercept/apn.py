@@ -161,7 +161,14 @@ class AugmentedPNGuidance(AbstractInterceptGuidance):
         doc="Schmitt off-threshold a_off in units of a_ref; trigger_off < trigger_on",
         tunable=True,
     )
-    n_min: Scalar = param(2.0, lo=0.0, hi=100.0, doc="lower bound of N (eq. 12: 2)")
+    n_min: Scalar = param(
+        2.0,
+        lo=2.0,
+        hi=100.0,
+        doc="lower bound of N (eq. 12: 2); at least 2: below it the PN command grows without "
+        "bound as the time to go falls, and the trigger thresholds (a_ref = n_min q / coast_s) "
+        "fall with it",
+    )
     temperature: Scalar = param(
         0.05, lo=0.0, lo_open=True, hi=10.0, doc="relaxed trigger (gradients only)"
     )

@@ -170,8 +170,8 @@ class Navigation(eqx.Module):
         hi=3600.0,
         units="s",
         static=True,
-        doc="LOS measurement interval; a whole multiple of guidance.dt_s (paper: every "
-        "guidance step, Fig. 4)",
+        doc="LOS measurement interval; a whole multiple of guidance.dt_s, at most "
+        "guidance.coast_s (paper: every guidance step, Fig. 4)",
     )
     process_noise_m2s3: Scalar = _navigation(1e-18, lo=0.0, hi=1.0, units="m^2/s^3")
     model_attitude_rad: Scalar = _navigation(

@@ -6,17 +6,28 @@ checks read the validated configuration in its file units (km, km/s, AU, deg).
 
 import math
 
-from ...constants import AU_M
+from ...constants import AU_M, SECONDS_PER_DAY
 from ...schema import ScenarioError
 
 SUN_RADIUS_M = 6.957e8  # IAU 2015 nominal solar radius
+MIN_RANGE_RADII = 2.0  # the approach starts at least this many target radii from its centre
+# A terminal intercept (seed 004: 1.06 days): the B-plane is that of the initial relative
+# velocity and the loop is sized by the straight-line time of flight; longer approaches are
+# cruise (the midcourse system), as in the impactor.
+MAX_TOF_S = 30 * SECONDS_PER_DAY
+
+
+def _relative_state_m(cfg: dict) -> tuple[list[float], list[float]]:
+    """The Table 2 impactor position (m) and velocity (m/s) relative to the target."""
+    a = cfg["approach"]
+    r = [1e3 * (s - t) for s, t in zip(a["impactor_position_km"], a["target_position_km"])]
+    v = [1e3 * (s - t) for s, t in zip(a["impactor_velocity_kmps"], a["target_velocity_kmps"])]
+    return r, v
 
 
 def time_of_flight_s(cfg: dict) -> float:
     """Straight-line time of flight (s) of the Table 2 relative state."""
-    a = cfg["approach"]
-    r = [1e3 * (s - t) for s, t in zip(a["impactor_position_km"], a["target_position_km"])]
-    v = [1e3 * (s - t) for s, t in zip(a["impactor_velocity_kmps"], a["target_velocity_kmps"])]
+    r, v = _relative_state_m(cfg)
     vv = sum(x * x for x in v)
     return -sum(x * y for x, y in zip(r, v)) / vv if vv > 0 else -1.0
 
@@ -56,11 +67,24 @@ def check(cfg: dict) -> None:
                 f"from the Sun's centre; allowed: elements with a heliocentric distance above "
                 f"the Sun's radius, {SUN_RADIUS_M:g} m"
             )
+    _check_range(cfg)
     tof = time_of_flight_s(cfg)
     if tof <= 0.0:
         raise ScenarioError(
             "approach.impactor_velocity_kmps: the impactor must close on the target; allowed: "
             "a relative velocity with (relative position . relative velocity) < 0"
+        )
+    if not tof <= MAX_TOF_S:
+        raise ScenarioError(
+            f"approach.impactor_position_km: time of flight {tof / SECONDS_PER_DAY:.4g} days "
+            f"(range / closing speed); allowed: at most {MAX_TOF_S / SECONDS_PER_DAY:g} days (a "
+            "terminal intercept: the B-plane is fixed by the initial relative velocity; longer "
+            "approaches are a midcourse problem)"
+        )
+    if not sc["propellant_kg"] < sc["mass_kg"]:
+        raise ScenarioError(
+            f"spacecraft.propellant_kg: {sc['propellant_kg']:g} kg is not less than "
+            f"spacecraft.mass_kg = {sc['mass_kg']:g} kg; allowed: [0, mass_kg)"
         )
     if not g["coast_s"] < tof:
         raise ScenarioError(
@@ -71,9 +95,38 @@ def check(cfg: dict) -> None:
             f"spacecraft.pulse_width_s: {sc['pulse_width_s']:g} > guidance.dt_s = "
             f"{g['dt_s']:g}; allowed: (0, dt_s]"
         )
+    # The loop runs whole images (of whole steps) up to the first image boundary at or after
+    # the cut-off: less than one interval past it, so an interval within the final coast ends
+    # the loop before the B-plane (a longer one can fly the truth past it).
+    if not g["dt_s"] <= g["coast_s"]:
+        raise ScenarioError(
+            f"guidance.dt_s: {g['dt_s']:g} s is longer than guidance.coast_s = "
+            f"{g['coast_s']:g} s: the guidance loop, in whole steps, would end past the "
+            f"B-plane; allowed: (0, {g['coast_s']:g}] s"
+        )
     ratio = nv["image_interval_s"] / g["dt_s"]
     if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
         raise ScenarioError(
             f"navigation.image_interval_s: {nv['image_interval_s']:g} s is not a whole "
             f"multiple of guidance.dt_s = {g['dt_s']:g} s; allowed: n x dt_s, n >= 1"
+        )
+    if not nv["image_interval_s"] <= g["coast_s"]:
+        raise ScenarioError(
+            f"navigation.image_interval_s: {nv['image_interval_s']:g} s is longer than "
+            f"guidance.coast_s = {g['coast_s']:g} s: the guidance loop, in whole images, would "
+            f"end past the B-plane; allowed: n x {g['dt_s']:g} s (guidance.dt_s), n >= 1, up "
+            f"to {g['coast_s']:g} s"
+        )
+
+
+def _check_range(cfg: dict) -> None:
+    """The approach starts outside the target: more than ``MIN_RANGE_RADII`` radii from its
+    centre."""
+    r = math.hypot(*_relative_state_m(cfg)[0])
+    radius = cfg["dynamics"]["target_radius_m"]
+    if not r > MIN_RANGE_RADII * radius:
+        raise ScenarioError(
+            f"approach.impactor_position_km: {r:.4g} m from the target's centre; allowed: more "
+            f"than {MIN_RANGE_RADII:g} target radii ({MIN_RANGE_RADII * radius:g} m, "
+            "dynamics.target_radius_m)"
         )
