@@ -158,6 +158,20 @@ def test_a_retarget_after_the_last_scheduled_burn_is_refused(capsys, monkeypatch
     assert "after the last burn of guidance.predictive.burn_times_s (6780 s)" in err
 
 
+def test_a_burn_at_the_retarget_time_of_a_rounded_time_of_flight_is_accepted():
+    # 73440 km / 10.2 km/s = 7200.000000000001 s: the retarget at t_go = 750 s is the burn at
+    # 6450 s, as the simulation's times (rounded to 1 us) have it.
+    schedule = "guidance.predictive.burn_times_s"
+    sc = gj.load_scenario("deep-impact-predictive", {schedule: [1200.0, 4100.0, 6450.0]})
+    _, law = gj.build(sc)
+    assert float(law.burn_times_s[-1]) >= float(gj.build(sc)[0].context.retarget_time_s)
+    # a burn before the retarget, or at the cut-off, is still refused
+    with pytest.raises(ScenarioError, match="after the last burn"):
+        gj.load_scenario("deep-impact-predictive", {schedule: [1200.0, 4100.0, 6449.9999]})
+    with pytest.raises(ScenarioError, match="the burn at 7140 s is not before the cut-off"):
+        gj.load_scenario("deep-impact-predictive", {schedule: [1200.0, 4100.0, 6450.0, 7140.0]})
+
+
 # ---- runaway cost ---------------------------------------------------------------------------
 
 

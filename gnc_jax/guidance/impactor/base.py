@@ -7,9 +7,24 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from ..._types import Array, Float, Matrix3, Scalar, Vector3
-from ...dynamics.impactor import Engine, RelativeDynamics
+from ...dynamics.impactor import Engine, RelativeDynamics, straight_line_time_to_b_plane
 from ...geometry.bplane import b_plane_point_to_inertial
 from ..base import AbstractGuidanceLaw
+
+
+def nominal_time_of_flight_s(position, velocity) -> float:
+    """The nominal time of flight (s) of the straight-line approach to the B-plane
+    (:func:`~gnc_jax.dynamics.impactor.straight_line_time_to_b_plane`, any consistent units),
+    rounded to 1 us like every mission time derived from it (:func:`mission_time_s`)."""
+    return round(straight_line_time_to_b_plane(position, velocity), 6)
+
+
+def mission_time_s(time_of_flight_s: float, tgo_s: float) -> float:
+    """The mission time (s) of the time to go ``tgo_s`` before the nominal impact, rounded to
+    1 us: a scheduled event at "t_go = 750 s" then coincides with a burn scheduled at 6450 s
+    although 73440 km / 10.2 km/s = 7200.000000000001 s. The scenario checks and the
+    simulation's timeline read the same values."""
+    return round(time_of_flight_s - tgo_s, 6)
 
 
 class ImpactorGuidanceContext(eqx.Module):

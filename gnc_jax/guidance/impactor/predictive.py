@@ -16,16 +16,16 @@ import jax.numpy as jnp
 
 from ..._numerics import smooth_norm
 from ..._types import Array, Float, Scalar, Vector3
-from ...dynamics.impactor import (
-    ImpactorState,
-    coast_to_b_plane,
-    propagate,
-    straight_line_time_to_b_plane,
-)
+from ...dynamics.impactor import ImpactorState, coast_to_b_plane, propagate
 from ...params import from_config, param
 from ...schema import ScenarioError
 from ..base import EngineCommand, register_law, safe_unit
-from .base import AbstractImpactorGuidance, ImpactorGuidanceContext
+from .base import (
+    AbstractImpactorGuidance,
+    ImpactorGuidanceContext,
+    mission_time_s,
+    nominal_time_of_flight_s,
+)
 
 
 class PredictiveGuidanceState(NamedTuple):
@@ -36,6 +36,12 @@ class PredictiveGuidanceState(NamedTuple):
     mass_kg: Scalar  # on-board mass estimate (nominal flow)
     predicted_miss_m: Scalar  # |B_pred - aim| before the last burn
     burns: Scalar  # number of burns commanded so far
+
+
+def _time_of_flight_s(config) -> float:
+    """The nominal time of flight (s) of a validated scenario, rounded as the simulation's."""
+    a = config["approach"]
+    return nominal_time_of_flight_s(a["position_km"], a["velocity_kmps"])
 
 
 @register_law("predictive")
@@ -77,22 +83,17 @@ class PredictiveGuidance(AbstractImpactorGuidance):
         derived from the time of flight) when given, else ``burn_times_s``."""
         tgo = section.get("burn_tgo_s") or []
         if tgo:
-            tof = round(
-                straight_line_time_to_b_plane(
-                    config["approach"]["position_km"], config["approach"]["velocity_kmps"]
-                ),
-                6,
-            )
-            return [round(tof - x, 6) for x in tgo], "guidance.predictive.burn_tgo_s"
+            tof = _time_of_flight_s(config)
+            return [mission_time_s(tof, x) for x in tgo], "guidance.predictive.burn_tgo_s"
         return list(section["burn_times_s"]), "guidance.predictive.burn_times_s"
 
     @classmethod
     def check(cls, section, config):
+        # The cut-off and retarget times as the simulation has them (rounded to 1 us): a burn
+        # at "t_go = 750 s" on a 73440 km / 10.2 km/s approach is the burn at 6450 s.
         cam, g = config["camera"], config["guidance"]
-        tof = straight_line_time_to_b_plane(
-            config["approach"]["position_km"], config["approach"]["velocity_kmps"]
-        )
-        t_cut = tof - g["cutoff_tgo_s"]
+        tof = _time_of_flight_s(config)
+        t_cut = mission_time_s(tof, g["cutoff_tgo_s"])
         tgo = section.get("burn_tgo_s") or []
         outside = [x for x in tgo if not g["cutoff_tgo_s"] < x <= tof]
         if outside:
@@ -116,7 +117,7 @@ class PredictiveGuidance(AbstractImpactorGuidance):
                 f"cut-off at {t_cut:g} s (time of flight {tof:g} s - guidance.cutoff_tgo_s "
                 f"{g['cutoff_tgo_s']:g} s); allowed: burns before {t_cut:g} s{or_cutoff}"
             )
-        t_retarget = tof - g["retarget_tgo_s"]
+        t_retarget = mission_time_s(tof, g["retarget_tgo_s"])
         if g["aim_final_km"] != g["aim_initial_km"] and not bt[-1] >= t_retarget:
             raise ScenarioError(
                 f"guidance.retarget_tgo_s: the aim point changes at {t_retarget:g} s (time of "
@@ -142,9 +143,7 @@ class PredictiveGuidance(AbstractImpactorGuidance):
         half the arc (seed 002 places it 420 s, 6 % of the arc, before impact). Allowed, but
         usually a schedule left over from another approach's timeline."""
         bt, name = cls.schedule(section, config)
-        tof = straight_line_time_to_b_plane(
-            config["approach"]["position_km"], config["approach"]["velocity_kmps"]
-        )
+        tof = _time_of_flight_s(config)
         arc = tof - config["guidance"]["cutoff_tgo_s"]
         if bt and bt[-1] < 0.5 * arc:
             return [

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 
 from ..._types import Array, Float, Scalar, Vector3
 from ...constants import AU_M
-from ...dynamics.impactor import straight_line_time_to_b_plane
+from ...guidance.impactor.base import mission_time_s, nominal_time_of_flight_s
 from ...navigation.camera import small_rotation
 from ...navigation.render import CameraModel, TargetModel
 from ...params import from_scenario, param
@@ -416,17 +416,14 @@ class Timeline(NamedTuple):
 def timeline(p: ImpactorParams) -> Timeline:
     """The mission times and loop sizes of ``p``: the one place they are derived (the
     simulation's loops and the cost model both read them)."""
-    tof = straight_line_time_to_b_plane(
+    tof = nominal_time_of_flight_s(
         [float(x) for x in p.approach.position_m], [float(x) for x in p.approach.velocity_mps]
     )
-    # Mission times derived from the time of flight are rounded to 1 us so that a scheduled
-    # event at "t_go = 750 s" coincides with a burn scheduled at 6450 s despite rounding.
-    tof = round(tof, 6)
     g, interval = p.guidance, p.camera.image_interval_s
-    t_cut = round(tof - g.cutoff_tgo_s, 6)
+    t_cut = mission_time_s(tof, g.cutoff_tgo_s)
     return Timeline(
         time_of_flight_s=tof,
-        retarget_time_s=round(tof - g.retarget_tgo_s, 6),
+        retarget_time_s=mission_time_s(tof, g.retarget_tgo_s),
         cutoff_time_s=t_cut,
         n_images=int(math.ceil(t_cut / interval - 1e-9)),
         steps_per_image=int(round(interval / g.dt_s)),
