@@ -111,6 +111,8 @@ def test_the_loader_and_run_accept_the_same_seeds(tmp_path):
         ("spacecraft.mass_kg=1e-6", "spacecraft.propellant_kg: 25 kg is not less than"),
         ("camera.image_interval_s=3600", "camera.image_interval_s: 3600 s leaves"),
         ("spacecraft.isp_s=5e-324", "spacecraft.isp_s: 5e-324 is out of range"),
+        # the aim point would change after the cut-off: the miss from an aim never flown
+        ("guidance.retarget_tgo_s=10", "guidance.retarget_tgo_s: 10 s is not more than"),
     ],
 )
 def test_impactor_inputs_outside_the_models_domain_are_refused(
@@ -156,6 +158,14 @@ def test_a_retarget_after_the_last_scheduled_burn_is_refused(capsys, monkeypatch
     err = refused(argv, capsys, monkeypatch)
     assert "guidance.retarget_tgo_s: the aim point changes at 14250 s" in err
     assert "after the last burn of guidance.predictive.burn_times_s (6780 s)" in err
+
+
+def test_a_change_of_aim_point_after_the_cutoff_is_refused_and_none_is_accepted():
+    at_cutoff = {"guidance.retarget_tgo_s": 60.0}
+    with pytest.raises(ScenarioError, match=r"allowed: \(60, 7200\) s, or aim_final_km"):
+        gj.load_scenario("deep-impact-los", at_cutoff)
+    # with one aim point the retarget time changes nothing
+    gj.load_scenario("deep-impact-los", {**at_cutoff, "guidance.aim_final_km": [0.0, 0.0]})
 
 
 def test_a_burn_at_the_retarget_time_of_a_rounded_time_of_flight_is_accepted():

@@ -9,6 +9,7 @@ import jax.numpy as jnp
 from ..._types import Array, Float, Matrix3, Scalar, Vector3
 from ...dynamics.impactor import Engine, RelativeDynamics, straight_line_time_to_b_plane
 from ...geometry.bplane import b_plane_point_to_inertial
+from ...schema import ScenarioError
 from ..base import AbstractGuidanceLaw
 
 
@@ -73,3 +74,21 @@ class AbstractImpactorGuidance(AbstractGuidanceLaw):
 
     laws: ClassVar[dict[str, type]] = {}
     nav_by_component: ClassVar[bool] = False
+
+    @classmethod
+    def check(cls, section, config):
+        """A change of aim point before the cut-off, or none: after the cut-off no law steers,
+        and the miss would be measured from an aim point that is never flown (mission times
+        as the simulation's, :func:`mission_time_s`). A law that overrides ``check`` calls it,
+        or checks the retarget its own way (the predictive law: a burn at or after it)."""
+        g, a = config["guidance"], config["approach"]
+        if g["aim_final_km"] == g["aim_initial_km"]:
+            return
+        tof = nominal_time_of_flight_s(a["position_km"], a["velocity_kmps"])
+        if not mission_time_s(tof, g["retarget_tgo_s"]) < mission_time_s(tof, g["cutoff_tgo_s"]):
+            raise ScenarioError(
+                f"guidance.retarget_tgo_s: {g['retarget_tgo_s']:g} s is not more than "
+                f"guidance.cutoff_tgo_s = {g['cutoff_tgo_s']:g} s: the aim point would change "
+                f"after the cut-off and never be flown; allowed: ({g['cutoff_tgo_s']:g}, "
+                f"{tof:g}) s, or aim_final_km equal to aim_initial_km"
+            )

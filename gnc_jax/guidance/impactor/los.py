@@ -155,6 +155,7 @@ class LOSSwitchingCurveGuidance(AbstractImpactorGuidance):
 
     @classmethod
     def check(cls, section, config):
+        super().check(section, config)
         check_schedules(section, cls.schedule_breakpoints, cls.schedules, "guidance.los")
         k1 = np.asarray(section["k1_schedule"] or [section["k1"]], float)
         k2 = np.asarray(section["k2_schedule"] or [section["k2"]], float)

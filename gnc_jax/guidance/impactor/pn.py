@@ -74,6 +74,7 @@ class ProportionalNavigationGuidance(AbstractImpactorGuidance):
 
     @classmethod
     def check(cls, section, config):
+        super().check(section, config)
         if section["trigger_off_mmps2"] >= section["trigger_on_mmps2"]:
             raise ScenarioError(
                 f"guidance.pn.trigger_off_mmps2: {section['trigger_off_mmps2']:g} >= "

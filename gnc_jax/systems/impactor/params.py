@@ -369,7 +369,8 @@ class GuidanceTiming(eqx.Module):
         static=True,
         lo=0.0,
         units="s",
-        doc="nominal time to go at which the aim point changes",
+        doc="nominal time to go at which the aim point changes; more than cutoff_tgo_s "
+        "unless aim_final_km = aim_initial_km (a later change is never flown)",
     )
     cutoff_tgo_s: float = param(
         60.0,
