@@ -168,6 +168,17 @@ def test_a_change_of_aim_point_after_the_cutoff_is_refused_and_none_is_accepted(
     gj.load_scenario("deep-impact-los", {**at_cutoff, "guidance.aim_final_km": [0.0, 0.0]})
 
 
+def test_a_control_step_past_the_nominal_impact_is_refused():
+    # 73445.1 km at 10.2 km/s: impact at 7200.5 s; with no cut-off the control step that
+    # starts at 7200 s ends at 7201 s, 5 km past the B-plane.
+    past = {"approach.position_km": [73445.1, 0.0, 0.0], "guidance.cutoff_tgo_s": 0.0}
+    with pytest.raises(
+        ScenarioError, match=r"guidance.cutoff_tgo_s: 0 s .* allowed: at least 0.5 s"
+    ):
+        gj.load_scenario("deep-impact-los", past)
+    gj.load_scenario("deep-impact-los", {**past, "guidance.cutoff_tgo_s": 0.5})
+
+
 def test_a_burn_at_the_retarget_time_of_a_rounded_time_of_flight_is_accepted():
     # 73440 km / 10.2 km/s = 7200.000000000001 s: the retarget at t_go = 750 s is the burn at
     # 6450 s, as the simulation's times (rounded to 1 us) have it.

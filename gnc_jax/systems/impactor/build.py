@@ -89,6 +89,7 @@ def build(scenario) -> ImpactorSimulation:
         consider_attitude_bias=p.navigation.consider_attitude_bias,
         n_images=times.n_images,
         steps_per_image=times.steps_per_image,
+        steps_after_cutoff=times.steps_after_cutoff,
         coast_steps=dy.coast_steps,
         camera_misaligned=float(p.errors.camera_misalignment_rad) != 0.0,
         measurement=measurement_class(p.navigation.measurement).from_setup(setup),

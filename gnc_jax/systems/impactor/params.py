@@ -24,7 +24,7 @@ from ...navigation.camera import small_rotation
 from ...navigation.render import CameraModel, TargetModel
 from ...params import from_scenario, param
 from .errors import UG, URAD, ImpactorErrors
-from .schema import MAX_TIDE_RATIO, MIN_RANGE_RADII, MIN_SPEED_KMPS, MIN_SUN_AU
+from .schema import MAX_TIDE_RATIO, MIN_RANGE_RADII, MIN_SPEED_KMPS, MIN_SUN_AU, guided_loop
 
 
 class Approach(eqx.Module):
@@ -148,7 +148,15 @@ class CameraParams(eqx.Module):
         2.103, section="camera", lo=0.0, lo_open=True, hi=100.0, units="m"
     )
     image_interval_s: float = param(
-        15.0, section="camera", static=True, lo=0.0, lo_open=True, hi=3600.0, units="s"
+        15.0,
+        section="camera",
+        static=True,
+        lo=0.0,
+        lo_open=True,
+        hi=3600.0,
+        units="s",
+        doc="one image every interval from t = 0; an interval that does not divide the time to "
+        "the cut-off leaves a shorter last one, ending at the cut-off",
     )
     pixel_pitch_m: Scalar = param(
         21.0,
@@ -378,7 +386,8 @@ class GuidanceTiming(eqx.Module):
         static=True,
         lo=0.0,
         units="s",
-        doc="no burn in the last cutoff_tgo_s before the nominal impact",
+        doc="no burn in the last cutoff_tgo_s before the nominal impact; the control step "
+        "that starts before the cut-off must end by the nominal impact",
     )
 
 
@@ -412,22 +421,28 @@ class Timeline(NamedTuple):
     cutoff_time_s: float
     n_images: int  # images before the cut-off, one every image interval from t = 0
     steps_per_image: int  # control steps per image interval
+    steps_after_cutoff: int  # control steps the last image interval leaves out
 
 
 def timeline(p: ImpactorParams) -> Timeline:
     """The mission times and loop sizes of ``p``: the one place they are derived (the
-    simulation's loops and the cost model both read them)."""
+    simulation's loops and the cost model both read them; the loop's sizes are
+    :func:`~.schema.guided_loop`'s)."""
     tof = nominal_time_of_flight_s(
         [float(x) for x in p.approach.position_m], [float(x) for x in p.approach.velocity_mps]
     )
-    g, interval = p.guidance, p.camera.image_interval_s
+    g = p.guidance
     t_cut = mission_time_s(tof, g.cutoff_tgo_s)
+    n_images, steps_per_image, steps_after_cutoff = guided_loop(
+        t_cut, p.camera.image_interval_s, g.dt_s
+    )
     return Timeline(
         time_of_flight_s=tof,
         retarget_time_s=mission_time_s(tof, g.retarget_tgo_s),
         cutoff_time_s=t_cut,
-        n_images=int(math.ceil(t_cut / interval - 1e-9)),
-        steps_per_image=int(round(interval / g.dt_s)),
+        n_images=n_images,
+        steps_per_image=steps_per_image,
+        steps_after_cutoff=steps_after_cutoff,
     )
 
 

@@ -9,6 +9,7 @@ import math
 
 from ...constants import AU_M, G0_MPS2, SECONDS_PER_DAY
 from ...dynamics.impactor import straight_line_time_to_b_plane
+from ...guidance.impactor.base import mission_time_s, nominal_time_of_flight_s
 from ...schema import ScenarioError
 
 MIN_RANGE_RADII = 2.0  # the approach starts at least this many target radii away
@@ -26,6 +27,20 @@ def time_of_flight_s(cfg: dict) -> float:
     return straight_line_time_to_b_plane(
         cfg["approach"]["position_km"], cfg["approach"]["velocity_kmps"]
     )
+
+
+def guided_loop(cutoff_time_s: float, image_interval_s: float, dt_s: float) -> tuple[int, int, int]:
+    """The guided loop's sizes: ``(images, control steps per image interval, control steps
+    the last interval leaves out)``.
+
+    One image every ``image_interval_s`` from t = 0 before the cut-off at ``cutoff_time_s``,
+    and every control step that starts before the cut-off: an image interval that does not
+    divide the time to the cut-off leaves a shorter last interval, so that the loop ends at
+    the first control step at or after the cut-off, not up to an image interval later."""
+    images = math.ceil(cutoff_time_s / image_interval_s - 1e-9)
+    steps = round(image_interval_s / dt_s)
+    last = math.ceil((cutoff_time_s - (images - 1) * image_interval_s) / dt_s - 1e-9)
+    return images, steps, steps - min(max(last, 1), steps)
 
 
 def _norm(v) -> float:
@@ -154,8 +169,8 @@ def _check_propellant(cfg: dict, tof: float) -> None:
 
 def _check_timeline(cfg: dict, tof: float) -> None:
     """The control step divides the image interval, the cut-off and retarget times fall
-    within the time of flight ``tof`` (s), and at least ``MIN_IMAGES`` images come before the
-    cut-off."""
+    within the time of flight ``tof`` (s), at least ``MIN_IMAGES`` images come before the
+    cut-off, and the guided loop ends before the nominal impact (:func:`_check_loop_end`)."""
     g, cam = cfg["guidance"], cfg["camera"]
     ratio = cam["image_interval_s"] / g["dt_s"]
     if abs(ratio - round(ratio)) > 1e-9 * ratio:
@@ -179,6 +194,25 @@ def _check_timeline(cfg: dict, tof: float) -> None:
             f"camera.image_interval_s: {cam['image_interval_s']:g} s leaves {images:.3g} images "
             f"before the cut-off; allowed: at most "
             f"{(tof - g['cutoff_tgo_s']) / MIN_IMAGES:.4g} s ({MIN_IMAGES} images)"
+        )
+    _check_loop_end(cfg)
+
+
+def _check_loop_end(cfg: dict) -> None:
+    """The guided loop's last control step (:func:`guided_loop`) ends at or before the
+    nominal impact: a cut-off less than a control step before it may leave a step that starts
+    before the cut-off and ends past the B-plane."""
+    g, interval = cfg["guidance"], cfg["camera"]["image_interval_s"]
+    tof = nominal_time_of_flight_s(cfg["approach"]["position_km"], cfg["approach"]["velocity_kmps"])
+    images, steps, left_out = guided_loop(
+        mission_time_s(tof, g["cutoff_tgo_s"]), interval, g["dt_s"]
+    )
+    end = (images - 1) * interval + (steps - left_out) * g["dt_s"]
+    if end > tof + 1e-6:
+        raise ScenarioError(
+            f"guidance.cutoff_tgo_s: {g['cutoff_tgo_s']:g} s leaves a control step that ends at "
+            f"{end:.10g} s, after the nominal impact at {tof:.10g} s; allowed: at least "
+            f"{tof - (end - g['dt_s']):.6g} s (every control step ends before the B-plane)"
         )
 
 

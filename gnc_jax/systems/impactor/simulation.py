@@ -102,10 +102,26 @@ def run(
     interval plus a carry per image instead of every control step's residuals; the control
     steps are checkpointed inside it (:func:`~.step.image_step`), so that recomputation keeps
     one loop state per control step. Without differentiation the checkpoints are inlined: the
-    evaluation is unchanged."""
-    step = jax.checkpoint(functools.partial(image_step, sim, law, draws, record), prevent_cse=False)
-    state, rec = jax.lax.scan(step, state, jnp.arange(sim.n_images))
-    return state, flatten_trace(rec)
+    evaluation is unchanged.
+
+    An image interval that does not divide the time to the cut-off leaves a last interval of
+    ``steps_per_image - steps_after_cutoff`` control steps, run after the scan: the loop ends
+    at the cut-off, and the truth never flies past the target before the coast."""
+
+    def interval(steps):
+        step = functools.partial(image_step, sim, law, draws, record, steps=steps)
+        return jax.checkpoint(step, prevent_cse=False)
+
+    shortened = sim.steps_after_cutoff > 0
+    full = sim.n_images - int(shortened)
+    state, rec = jax.lax.scan(interval(sim.steps_per_image), state, jnp.arange(full))
+    trace = flatten_trace(rec)
+    if shortened:
+        last = interval(sim.steps_per_image - sim.steps_after_cutoff)
+        state, last_rec = last(state, jnp.asarray(full))
+        if record:
+            trace = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), trace, last_rec)
+    return state, trace
 
 
 def finish(

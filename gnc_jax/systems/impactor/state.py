@@ -43,7 +43,10 @@ class ImpactorSimulation(eqx.Module):
         process_noise_m2s3: white-acceleration density of the filter's process noise.
         consider_attitude_bias: 1.0 to add the attitude-bias rotation to the filter's initial
             covariance (:func:`~.navigation.attitude_bias_covariance`), 0.0 to ignore it.
-        n_images, steps_per_image: loop sizes (static); coast_steps: RK4 steps of the final coast.
+        n_images, steps_per_image: loop sizes (static); steps_after_cutoff: control steps the
+            last image interval leaves out so that the loop ends at the cut-off (static, 0 when
+            the image interval divides the time to the cut-off); coast_steps: RK4 steps of the
+            final coast.
         camera_misaligned: whether the camera misalignment is drawn and applied (static, as the
             dynamics' terms: computed only when its sigma is nonzero).
         measurement: the LOS measurement front end (a registered
@@ -70,6 +73,7 @@ class ImpactorSimulation(eqx.Module):
     consider_attitude_bias: Scalar
     n_images: int = eqx.field(static=True)
     steps_per_image: int = eqx.field(static=True)
+    steps_after_cutoff: int = eqx.field(static=True, default=0)
     coast_steps: int = eqx.field(static=True, default=4)
     camera_misaligned: bool = eqx.field(static=True, default=False)
     reverse_mode: bool = eqx.field(static=True, default=False)

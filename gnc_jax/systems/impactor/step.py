@@ -133,11 +133,16 @@ def control_step(sim: ImpactorSimulation, law, accel_bias, record, state: LoopSt
     return new, rec
 
 
-def image_step(sim: ImpactorSimulation, law, draws: ImpactorDraws, record, state: LoopState, i):
+def image_step(
+    sim: ImpactorSimulation, law, draws: ImpactorDraws, record, state: LoopState, i, steps=None
+):
     """One image interval: image -> EKF update -> guidance ``plan`` (:func:`begin_interval`) ->
-    control steps -> accelerometer noise -> covariance propagation (:func:`end_interval`)."""
+    control steps -> accelerometer noise -> covariance propagation (:func:`end_interval`).
+
+    ``steps``: the interval's control steps (static), ``sim.steps_per_image`` when ``None``;
+    fewer for a last interval that ends at the cut-off."""
     dt = sim.context.dt_s
-    n = sim.steps_per_image
+    n = sim.steps_per_image if steps is None else steps
     t = i * sim.context.image_interval_s
     state, row = begin_interval(sim, law, draws, state, i, t)
     k = jnp.arange(n)
@@ -171,7 +176,8 @@ def image_step(sim: ImpactorSimulation, law, draws: ImpactorDraws, record, state
         step, state._replace(**by_component), inputs, unroll=loop_shape().unroll
     )
     state = inner._replace(truth=as_arrays(inner.truth), estimate=as_arrays(inner.estimate))
-    return end_interval(sim, state, row), rec
+    length_s = sim.context.image_interval_s if n == sim.steps_per_image else n * dt
+    return end_interval(sim, state, row, length_s), rec
 
 
 def begin_interval(
@@ -255,10 +261,10 @@ def begin_interval(
     return state, row
 
 
-def end_interval(sim: ImpactorSimulation, state: LoopState, row) -> LoopState:
-    """The end of an image interval: the accelerometer's white noise reaches the estimate
-    (:func:`~.navigation.accel_noise`, from ``row[8:14]`` of the burn table), the covariance
-    grows, and the interval's burn and firings are counted."""
+def end_interval(sim: ImpactorSimulation, state: LoopState, row, length_s: float) -> LoopState:
+    """The end of an image interval of ``length_s`` seconds: the accelerometer's white noise
+    reaches the estimate (:func:`~.navigation.accel_noise`, from ``row[8:14]`` of the burn
+    table), the covariance grows, and the interval's burn and firings are counted."""
     ctx, err = sim.context, sim.errors
     dt = ctx.dt_s
     estimate, engine, tally = state.estimate, state.actuator, state.tally
@@ -268,7 +274,7 @@ def end_interval(sim: ImpactorSimulation, state: LoopState, row) -> LoopState:
     tb = estimate.burn_time_image_s
     model = sim.noise_model
     q_dv = model.accel_noise_mps2**2 * dt * tb + model.accel_bias_mps2**2 * tb**2
-    p = propagate_packed(estimate.p, ctx.image_interval_s, sim.process_noise_m2s3, q_dv)
+    p = propagate_packed(estimate.p, length_s, sim.process_noise_m2s3, q_dv)
     return state._replace(
         estimate=estimate._replace(r_hat=estimate.r_hat + dr, v_hat=estimate.v_hat + dv, p=p),
         actuator=engine._replace(

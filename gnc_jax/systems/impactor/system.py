@@ -305,7 +305,7 @@ class ImpactorSystem(AbstractSystem):
             rays = (cam.samples / 32) ** 2
             labelling = (cam.roi_px / 32) ** 2 * cam.label_iterations / 24
             per_image += self.RENDER_STEPS * 0.5 * (rays + labelling)
-        return times.n_images * per_image + p.dynamics.coast_steps
+        return times.n_images * per_image - times.steps_after_cutoff + p.dynamics.coast_steps
 
     def schema(self):
         """The sections, with ``navigation.measurement`` choosing among the registered front

@@ -40,6 +40,21 @@ def test_the_law_corrects_the_delivery_error(short_scenario):
     assert s["dv_mean_mps"] > 1.0
 
 
+def test_an_image_interval_that_does_not_divide_the_arc_ends_the_loop_at_the_cutoff():
+    # 3000 s images on the 7140 s to the cut-off: two full intervals and one of 1140 s, so the
+    # loop ends at the cut-off, 60 s (612 km) before the B-plane, and not at 9000 s, past it.
+    sc = gj.load_scenario("deep-impact-los", {"camera.image_interval_s": 3000.0})
+    outcome, trace = gj.simulate_one(sc, 0)
+    t = np.asarray(trace.t_s)
+    np.testing.assert_array_equal(t, np.arange(7200.0 - 60.0))  # each 1 s step, once
+    speed = np.linalg.norm(np.asarray(trace.v_mps)[-1])
+    approach_s = -np.dot(trace.r_m[-1], trace.v_mps[-1]) / speed**2
+    assert approach_s == pytest.approx(60.0, abs=2.0)  # still approaching the target
+    assert int(outcome.status) == gj.Status.ok and int(outcome.images_rejected) == 0
+    sim, _ = gj.build(sc)
+    assert (sim.n_images, sim.steps_per_image, sim.steps_after_cutoff) == (3, 3000, 3000 - 1140)
+
+
 @pytest.mark.slow
 def test_paper_scale_deep_impact(paper_scale):
     """Seed 000 (reduced to 300 runs in CI; --paper-scale runs the paper's 2000)."""
