@@ -48,12 +48,13 @@ class Field:
             if not self.choices:
                 return "text" + (f" ({self.doc})" if self.doc else "")
             return "one of " + ", ".join(repr(c) for c in self.choices)
-        lo = "-inf" if self.lo is None else f"{self.lo:g}"
-        hi = "inf" if self.hi is None else f"{self.hi:g}"
-        rng = f"{'(' if self.lo_open else '['}{lo}, {hi}]"
+        # An unbounded end is open: every number is finite (``check`` refuses inf and nan).
+        lo = "(-inf" if self.lo is None else f"{'(' if self.lo_open else '['}{self.lo:g}"
+        hi = "inf)" if self.hi is None else f"{self.hi:g}]"
+        rng = f"{lo}, {hi}"
         unit = f" {self.units}" if self.units else ""
         if self.kind == "floats":
-            n = f"{self.length} numbers" if self.length else "a list of numbers"
+            n = _numbers(self.length) if self.length else "a list of numbers"
             return f"{n}, each in {rng}{unit}"
         return f"{'an integer' if self.kind == 'int' else 'a number'} in {rng}{unit}"
 
@@ -93,11 +94,15 @@ class Field:
             if not isinstance(value, (list, tuple)):
                 fail(f"expected a list, got {value!r}")
             if self.length is not None and len(value) != self.length:
-                fail(f"expected {self.length} numbers, got {len(value)}")
+                fail(f"expected {_numbers(self.length)}, got {len(value)}")
             if len(value) < self.min_length:
-                fail(f"expected at least {self.min_length} numbers, got {len(value)}")
+                fail(f"expected at least {_numbers(self.min_length)}, got {len(value)}")
             return [number(v, False) for v in value]
         raise AssertionError(self.kind)
+
+
+def _numbers(n: int) -> str:
+    return f"{n} number" + ("" if n == 1 else "s")
 
 
 Schema = dict[str, dict[str, Field]]  # section -> field name -> Field

@@ -1,6 +1,7 @@
 """Scenario validation, CLI commands, results files and reports."""
 
 import json
+import math
 import pathlib
 
 import numpy as np
@@ -11,6 +12,7 @@ import gnc_jax as gj
 from gnc_jax import cli, montecarlo
 from gnc_jax import study as study_module
 from gnc_jax.scenario import ScenarioError
+from gnc_jax.schema import Field
 
 SHORT = [
     "approach.position_km=[10200.0, 0.0, 0.0]",
@@ -105,6 +107,11 @@ BAD_INPUT += [
         ["run", APN, "--set", "approach.impactor_position_km=[1.34176e8, 1.7e9, 0.0]"],
         "time of flight 1929 days (range / closing speed); allowed: at most 30 days",
     ),
+    (["run", APN, "--set", "guidance.coast_s=1e6"], "guidance.coast_s: 1e+06; allowed: (0, "),
+    (
+        ["run", APN, "--set", "approach.target_position_km=[inf, 0.0, 0.0]"],
+        "approach.target_position_km: got inf; allowed: 3 numbers, each in (-inf, inf) km",
+    ),
 ]
 
 
@@ -149,6 +156,23 @@ def test_api_errors_name_the_field():
         )
     # the LOS law has no burn times: a schedule it does not fly is not checked against it
     sc.with_overrides({"camera.image_interval_s": 30.0, "guidance.dt_s": 1.0})
+    # a single override string is not a list of overrides (its characters are not fields)
+    with pytest.raises(ScenarioError, match=r"^overrides: the single string 'guidance.los.k1=3'"):
+        gj.load_scenario("deep-impact-los", overrides="guidance.los.k1=3")
+    with pytest.raises(ScenarioError, match=r"^overrides: 3; allowed"):
+        sc.with_overrides([3])
+
+
+def test_a_field_range_reads_as_it_is_enforced():
+    """An unbounded end is printed open (inf itself is refused); counts agree in number."""
+    one = Field("floats", [0.0], lo=0.0, length=1, units="km")
+    assert one.allowed() == "1 number, each in [0, inf) km"
+    assert Field("float", 0.0).allowed() == "a number in (-inf, inf)"
+    with pytest.raises(ScenarioError, match=r"^x: got inf; allowed: 1 number, each in \[0, inf\)"):
+        one.check("x", [math.inf])
+    with pytest.raises(ScenarioError, match=r"^x: expected 1 number, got 2"):
+        one.check("x", [1.0, 2.0])
+    assert one.check("x", [1e308]) == [1e308]
 
 
 def test_user_toml_and_resolved_round_trip(tmp_path):

@@ -54,13 +54,25 @@ class Scenario:
         return get_system(self.kind)
 
     def with_overrides(self, overrides) -> "Scenario":
-        """A copy with ``section.field=value`` overrides applied (strings or a mapping)."""
+        """A copy with ``section.field=value`` overrides applied: a list of such strings (or
+        ``(section.field, value)`` pairs) or a mapping ``{section.field: value}``."""
+        if isinstance(overrides, (str, bytes)):
+            raise ScenarioError(
+                f"overrides: the single string {overrides!r}; allowed: a list of "
+                "section.field=value strings (e.g. ['guidance.los.k1=3']) or a mapping "
+                "{section.field: value}"
+            )
         raw = copy.deepcopy(self.config)
         items = overrides.items() if isinstance(overrides, dict) else overrides
         for item in items:
             if isinstance(item, str):
                 section, field, value = parse_override(item)
             else:
+                if not isinstance(item, (tuple, list)) or len(item) != 2:
+                    raise ScenarioError(
+                        f"overrides: {item!r}; allowed: section.field=value strings or "
+                        "(section.field, value) pairs"
+                    )
                 key, value = item
                 if not isinstance(key, str) or key.count(".") not in (1, 2):
                     raise ScenarioError(
@@ -137,7 +149,8 @@ def load_scenario(name_or_path: str | pathlib.Path, overrides=()) -> Scenario:
 
     Args:
         name_or_path: e.g. ``"deep-impact-los"`` or ``"my_case.toml"``.
-        overrides: ``["guidance.k1=3", ...]`` or ``{"guidance.k1": 3}``.
+        overrides: ``["guidance.k1=3", ...]`` or ``{"guidance.k1": 3}`` (a single string is
+            refused: it is not a list of overrides).
 
     Raises:
         ScenarioError: unknown scenario, unknown field, wrong type or out-of-range value.

@@ -88,7 +88,7 @@ def check(cfg: dict) -> None:
         )
     if not g["coast_s"] < tof:
         raise ScenarioError(
-            f"guidance.coast_s: {g['coast_s']:g}; allowed: [0, {tof:.6g}) s (time of flight)"
+            f"guidance.coast_s: {g['coast_s']:g}; allowed: (0, {tof:.6g}) s (time of flight)"
         )
     if sc["pulse_width_s"] > g["dt_s"]:
         raise ScenarioError(
