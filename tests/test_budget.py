@@ -15,6 +15,7 @@ import pytest
 
 import gnc_jax as gj
 from gnc_jax._random import DrawKey, normal, run_key, stream_key, stream_normal, uniform
+from gnc_jax.budget import format_table
 from gnc_jax.budget.plan import factors, layout
 from gnc_jax.systems import base
 
@@ -208,3 +209,30 @@ def test_cli_budget_and_report(tmp_path):
     )
     assert report.returncode == 0, report.stderr
     assert (out / "budget_y.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_a_metric_without_enough_ok_runs_says_how_many():
+    """A method needs 8 runs ok in all its designs: fewer is said with the count, not as a
+    metric without variance (which is what the same value in every run reads)."""
+    budget = dict(
+        metrics=["y"],
+        methods=["sobol", "oat"],
+        factors={"s0": ["s0"]},
+        counts=dict(runs=8, all_on_ok=4, sobol_ok=4, oat_ok=4),
+        checks={},
+        rows=[],
+    )
+    assert format_table(budget) == (
+        "y: too few ok runs to share its variance (sobol: 4 < 8 ok runs; oat: 4 < 8 ok runs)"
+    )
+    row = dict(metric="y", source="s0", method="one_at_a_time", share=1.0, share_lo=0.9)
+    budget.update(
+        counts=dict(runs=8, all_on_ok=8, sobol_ok=5, oat_ok=8),
+        checks={"y": {"all_on_variance": 2.0, "oat_sum": 1.0}},
+        rows=[dict(row, share_hi=1.1, variance=2.0)],
+    )
+    lines = format_table(budget).splitlines()
+    assert lines[0] == "y: variance 2" and lines[-1] == "  not estimated (sobol: 5 < 8 ok runs)"
+    budget.update(counts=dict(runs=8, all_on_ok=8, sobol_ok=8, oat_ok=8))
+    budget["checks"]["y"]["all_on_variance"] = 0.0
+    assert format_table(budget) == ("y: no variance (the same in every run): nothing to share")

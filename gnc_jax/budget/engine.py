@@ -38,8 +38,8 @@ LINEAR_COST = 3.0
 
 
 def _check(scenario, system, runs, metrics, methods):
-    if isinstance(runs, bool) or not isinstance(runs, int) or runs < 8:
-        raise ScenarioError(f"runs: {runs!r}; allowed: an integer >= 8")
+    if isinstance(runs, bool) or not isinstance(runs, int) or runs < estimators.MIN_RUNS:
+        raise ScenarioError(f"runs: {runs!r}; allowed: an integer >= {estimators.MIN_RUNS}")
     known = tuple(system.budget_metrics)
     if not known:
         raise ScenarioError(f"scenario.kind: {system.name} declares no budget metrics")
@@ -247,7 +247,7 @@ def _rows_of(metric, j, designs, linear, names, sobol_ok, oat_ok, lin_ok, boot, 
             )
         )
 
-    if "b" in designs and sobol_ok.sum() >= 8:
+    if "b" in designs and sobol_ok.sum() >= estimators.MIN_RUNS:
         m = sobol_ok
         f_ab = np.stack([designs[f"ab:{s}"][0][j][m] for s in names])
         rows_boot = estimators.resamples(int(m.sum()), bootstrap, seed)
@@ -280,7 +280,7 @@ def _rows_of(metric, j, designs, linear, names, sobol_ok, oat_ok, lin_ok, boot, 
             first_sum_le_1=bool(s["first_sum_lo"] <= 1.0),
             total_ge_first=bool(np.all(s["total_hi"] >= s["first_lo"])),
         )
-    if any(k.startswith("oat:") for k in designs) and oat_ok.sum() >= 8:
+    if any(k.startswith("oat:") for k in designs) and oat_ok.sum() >= estimators.MIN_RUNS:
         m = oat_ok
         parts = np.stack([designs[f"oat:{s}"][0][j][m] for s in names])
         rows_boot = estimators.resamples(int(m.sum()), bootstrap, seed + 1)
@@ -296,7 +296,7 @@ def _rows_of(metric, j, designs, linear, names, sobol_ok, oat_ok, lin_ok, boot, 
             )
         checks.setdefault(metric, {})["all_on_variance"] = float(f_a[m].var(ddof=1))
         checks[metric]["oat_sum"] = float(np.sum(r["share"]))
-    if lin_ok is not None and lin_ok.sum() >= 8:
+    if lin_ok is not None and lin_ok.sum() >= estimators.MIN_RUNS:
         m = lin_ok
         rows_boot = estimators.resamples(int(m.sum()), bootstrap, seed + 2)
         r = estimators.variance_shares(

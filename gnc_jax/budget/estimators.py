@@ -19,6 +19,8 @@ import numpy as np
 
 LEVEL = 0.95
 """Default confidence level of the bootstrap intervals."""
+MIN_RUNS = 8
+"""Fewest runs an index is estimated from (a method's runs that are ok in all its designs)."""
 
 
 def _indices(f_a, f_b, f_ab):
@@ -81,4 +83,4 @@ def variance_shares(parts, reference, boot, centred: bool = True, level: float =
     return dict(variance=spread(parts), share=share, share_lo=lo, share_hi=hi)
 
 
-__all__ = ["LEVEL", "resamples", "sobol", "variance_shares"]
+__all__ = ["LEVEL", "MIN_RUNS", "resamples", "sobol", "variance_shares"]

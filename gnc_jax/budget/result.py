@@ -10,6 +10,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from ..scenario import Scenario
+from .estimators import MIN_RUNS
 
 METHOD_LABELS = {
     "first_order": "first order",
@@ -118,10 +119,19 @@ def format_table(budget: dict) -> str:
     """Plain-text tables of a budget (``budget.json``'s content): one per metric, a row per
     source, a column per method (share and interval, in per cent)."""
     methods = [m for m in METHOD_LABELS if any(r["method"] == m for r in budget["rows"])]
+    counts = budget.get("counts", {})
+    short = [
+        f"{m}: {counts[f'{m}_ok']} < {MIN_RUNS} ok runs"
+        for m in budget["methods"]
+        if counts.get(f"{m}_ok", MIN_RUNS) < MIN_RUNS
+    ]
     lines = []
     for metric in budget["metrics"]:
         c = budget["checks"].get(metric, {})
         variance = c.get("variance", c.get("all_on_variance", float("nan")))
+        if not c and short:
+            lines.append(f"{metric}: too few ok runs to share its variance ({'; '.join(short)})")
+            continue
         if not variance > 0:
             lines.append(f"{metric}: no variance (the same in every run): nothing to share")
             continue
@@ -150,6 +160,8 @@ def format_table(budget: dict) -> str:
                     f"{100 * r['share_hi']:6.1f}]".rjust(22)
                 )
             lines.append(f"  {source:<22}" + "".join(cells))
+        if short:
+            lines.append(f"  not estimated ({'; '.join(short)})")
     return "\n".join(lines)
 
 
