@@ -13,7 +13,11 @@ marks cells that cannot work whatever the guidance (the capsule: outside the ent
 they are not simulated. A cell whose scenario the system refuses while it is built (e.g. a
 capsule target the reference design cannot reach) is recorded as ``refused`` with the reason.
 Every cell's values are validated before the first study: a bad grid stops at once with one
-line naming the field.
+line naming the field, and so does a field given on two axes. So does an envelope whose cost
+estimate exceeds ``max_hours``: the cells' :func:`~gnc_jax.estimate_cost` (every cell's,
+infeasible ones included, or on a grid of more than ``COST_SAMPLE`` cells their mean over that
+many cells spread over the grid, times the cells) plus ``CELL_OVERHEAD_S`` per cell, refused
+before the cells are validated; an estimate above ``ANNOUNCE_S`` is printed.
 """
 
 import dataclasses
@@ -31,10 +35,19 @@ import pyarrow.parquet as pq
 
 from .backend import select
 from .cells import run_cells
+from .montecarlo import ANNOUNCE_S, MAX_HOURS
+from .planner import duration_text, estimate_cost
 from .scenario import Scenario, ScenarioError
 from .study import run_study
 
 SIMULATED, INFEASIBLE, REFUSED = "simulated", "infeasible", "refused"
+CELL_OVERHEAD_S = 0.07
+"""Wall seconds an envelope spends on a cell besides its runs (validating the cell's scenario,
+building its simulation, starting its study, summarising it), added to the runs' estimate.
+Measured: ``deep-impact-los`` (its test overrides), 20 cells of 2 runs on the 2-core machine,
+0.074 s per cell after the first, of which the runs' estimate is 0.002 s."""
+COST_SAMPLE = 256
+"""Cells costed, at most: a larger grid's runs are estimated from this many of its cells."""
 
 
 def parse_grid(spec: str) -> tuple[str, list[float]]:
@@ -107,6 +120,68 @@ class Envelope:
         return [out / "cells.parquet", out / "envelope.json", *envelope_figures(self, out)]
 
 
+def grid_axes(grid) -> dict[str, list[float]]:
+    """The axes ``{section.field: values}`` of ``grid`` (a mapping, or specs for
+    :func:`parse_grid`); a field given twice is refused."""
+    if isinstance(grid, dict):
+        return dict(grid)
+    if isinstance(grid, str):
+        raise ScenarioError(
+            f"grid: the single string {grid!r}; allowed: a list of section.field=a:b:n specs "
+            "or a mapping {section.field: values}"
+        )
+    axes: dict[str, list[float]] = {}
+    for spec in grid:
+        key, values = parse_grid(spec)
+        if key in axes:
+            raise ScenarioError(
+                f"--grid {spec}: {key} is already an axis; allowed: each field on one --grid "
+                "(its values as a:b:n or v1,v2,...)"
+            )
+        axes[key] = values
+    return axes
+
+
+def _refuse_cost(what: str, max_hours: float) -> ScenarioError:
+    return ScenarioError(
+        f"cost: {what}; allowed: at most {max_hours:g} h (raise max_hours, CLI --max-hours, or "
+        "use fewer cells or runs)"
+    )
+
+
+def _checked_cost(scenario, axes, runs, backend, max_hours, progress) -> None:
+    """Refuse (:class:`ScenarioError`) an envelope estimated to take more than ``max_hours``
+    (module docstring); announce one estimated to take more than ``ANNOUNCE_S``. A grid of
+    more than ``COST_SAMPLE`` cells is costed from that many cells spread evenly over it (the
+    mean of their runs' estimates, times the cells), before the others are validated."""
+    names, values = list(axes), list(axes.values())
+    n_cells = math.prod(len(v) for v in values)
+    limit, overhead = max_hours * 3600, n_cells * CELL_OVERHEAD_S
+    besides = f"{CELL_OVERHEAD_S:g} s per cell besides its runs"
+    if overhead > limit:  # refused before any cell is built
+        raise _refuse_cost(
+            f"{n_cells} cells, more than {duration_text(overhead)} at {besides}", max_hours
+        )
+    picks = np.unique(np.linspace(0, n_cells - 1, min(n_cells, COST_SAMPLE)).round().astype(int))
+    costs = []
+    for flat in picks:
+        index = np.unravel_index(flat, [len(v) for v in values])
+        cell = scenario.with_overrides({k: v[i] for k, v, i in zip(names, values, index)})
+        costs.append(estimate_cost(cell, runs, device=backend).seconds)
+    known = [c for c in costs if c is not None]
+    runs_s = float(np.mean(known)) * n_cells if known else 0.0
+    sampled = f" estimated from {len(picks)} of the cells" if len(picks) < n_cells else ""
+    what = (
+        f"{n_cells} cells of {runs} runs, about {duration_text(runs_s + overhead)} "
+        f"({duration_text(runs_s)} of runs{sampled}, and {besides})"
+        + ("" if len(known) == len(costs) else "; some cells of unknown cost")
+    )
+    if runs_s + overhead > limit:
+        raise _refuse_cost(what, max_hours)
+    if runs_s + overhead > ANNOUNCE_S:
+        _say(progress, f"envelope: estimated {what}")
+
+
 def _cell_scenarios(scenario: Scenario, axes: dict[str, list[float]]):
     names = list(axes)
     for values in itertools.product(*axes.values()):
@@ -124,6 +199,7 @@ def envelope(
     client=None,
     device: str | None = None,
     batch_cells: bool | None = None,
+    max_hours: float = MAX_HOURS,
     **check_options,
 ) -> Envelope:
     """A grid of Monte Carlo studies of ``scenario`` (see the module docstring).
@@ -140,15 +216,21 @@ def envelope(
         batch_cells: run the cells as one batch per program (:func:`gnc_jax.cells.run_cells`)
             instead of one study after another; default: on an accelerator, without a client
             (a GPU pays its loops' latency once instead of once per cell; a CPU gains nothing).
+        max_hours: refuse (before any study) an envelope estimated to take longer (module
+            docstring).
         check_options: passed to the system's pre-check (the capsule: ``load_limit_g``).
     """
-    axes = dict(parse_grid(g) for g in grid) if not isinstance(grid, dict) else dict(grid)
+    axes = grid_axes(grid)
     if not axes:
         raise ScenarioError("--grid: none given; allowed: one or more section.field=a:b:n")
     if isinstance(runs, bool) or not isinstance(runs, int) or runs <= 0:
         raise ScenarioError(f"runs: {runs!r}; allowed: an integer >= 1")
+    if isinstance(max_hours, bool) or not isinstance(max_hours, (int, float)) or not max_hours > 0:
+        raise ScenarioError(f"max_hours: {max_hours!r}; allowed: a number > 0")
     seed = scenario.seed if seed is None else seed
     system = scenario.system
+    backend = select(device)
+    _checked_cost(scenario, axes, runs, backend, max_hours, progress)
     cells = list(_cell_scenarios(scenario, axes))  # every cell validated before any study
     checks = system.envelope_check(
         [c.config for _, c in cells], runs=runs, seed=seed, **check_options
@@ -157,14 +239,16 @@ def envelope(
     rows = []
     t_all = time.perf_counter()
     if batch_cells is None:
-        batch_cells = client is None and select(device).platform != "cpu"
+        batch_cells = client is None and backend.platform != "cpu"
     batched = {}
     if batch_cells:
         if client is not None:
             raise ScenarioError("batch_cells: given with a client; allowed: one of them")
         todo = [n for n, check in enumerate(checks) if check.get("feasible", True)]
         _say(progress, f"envelope: {len(todo)} cells of {runs} runs in one batch per program")
-        done = run_cells([cells[n][1] for n in todo], runs, seed, device=device)
+        done = run_cells(
+            [cells[n][1] for n in todo], runs, seed, device=device, max_hours=max_hours
+        )
         batched = dict(zip(todo, done))
     for n, ((point, cell), check) in enumerate(zip(cells, checks)):
         row: dict[str, Any] = {"cell": n, **point, **check.get("columns", {})}
@@ -180,7 +264,13 @@ def envelope(
         t0 = time.perf_counter()
         try:
             study = batched.get(n) or run_study(
-                cell, runs=runs, seed=seed, progress=False, client=client, device=device
+                cell,
+                runs=runs,
+                seed=seed,
+                progress=False,
+                client=client,
+                device=device,
+                max_hours=max_hours,
             )
             if isinstance(study, ScenarioError):
                 raise study
@@ -221,4 +311,14 @@ def _say(progress: bool, line: str) -> None:
         print(line, file=sys.stderr, flush=True)
 
 
-__all__ = ["Envelope", "envelope", "parse_grid", "SIMULATED", "INFEASIBLE", "REFUSED"]
+__all__ = [
+    "CELL_OVERHEAD_S",
+    "COST_SAMPLE",
+    "Envelope",
+    "envelope",
+    "grid_axes",
+    "parse_grid",
+    "SIMULATED",
+    "INFEASIBLE",
+    "REFUSED",
+]

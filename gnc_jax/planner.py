@@ -74,14 +74,15 @@ class CostEstimate:
                 "measures one)"
             )
         latency = (
-            f" ({_duration(self.latency_s)} of it sequential-step latency)"
+            f" ({duration_text(self.latency_s)} of it sequential-step latency)"
             if self.latency_s > 0
             else ""
         )
-        return f"{steps}, about {_duration(self.seconds)} on {devices}{latency}"
+        return f"{steps}, about {duration_text(self.seconds)} on {devices}{latency}"
 
 
-def _duration(seconds: float) -> str:
+def duration_text(seconds: float) -> str:
+    """``seconds`` in the unit a reader takes in at once (s, min, h or days)."""
     if seconds < 120:
         return f"{seconds:.2g} s"
     if seconds < 7200:

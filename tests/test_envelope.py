@@ -1,5 +1,7 @@
 """``gnc-jax envelope`` and its capsule pre-check."""
 
+import itertools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -13,6 +15,7 @@ from gnc_jax import operating_envelope as envelope_module
 from gnc_jax.dynamics.entry import EntryState, entry_state_from_conditions
 from gnc_jax.guidance.entry.base import flight_variables
 from gnc_jax.guidance.entry.corridor import DT_S, fly_constant_bank
+from gnc_jax.planner import CostEstimate
 from gnc_jax.systems.capsule.envelope import entry_envelope
 from gnc_jax.systems.impactor.system import ImpactorSystem
 
@@ -37,6 +40,66 @@ def test_a_grid_value_outside_the_field_range_is_refused_before_any_study(capsys
     assert cli.main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and err.startswith("gnc-jax: error: entry.fpa_deg: -20")
+
+
+def test_a_field_on_two_axes_is_refused_in_one_line(capsys, tmp_path):
+    argv = ["envelope", "deep-impact-los", "--grid", "guidance.los.k1=3:5:3"]
+    argv += ["--grid", "guidance.los.k1=1,2", "--out", str(tmp_path)]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (
+        "gnc-jax: error: --grid guidance.los.k1=1,2: guidance.los.k1 is already an axis; "
+        "allowed: each field on one --grid (its values as a:b:n or v1,v2,...)"
+    )
+
+
+class _Ran(Exception):
+    pass
+
+
+def _no_study(*args, **kwargs):
+    raise _Ran
+
+
+def test_an_envelope_over_its_cost_is_refused_before_any_study(monkeypatch):
+    """The estimate is each cell's study estimate (computed here cell by cell) plus the
+    per-cell overhead: refused just below it, run just above it; a grid of more than
+    COST_SAMPLE cells is costed from that many; one whose cells alone exceed the bound is
+    refused before any cell is built."""
+    monkeypatch.setattr(envelope_module, "run_study", _no_study)
+    sc = gj.load_scenario("deep-impact-los", ImpactorSystem.test_overrides)
+    axes = {"guidance.los.k1": [3.0, 4.0, 5.0], "spacecraft.mass_kg": [300.0, 372.0, 450.0]}
+    runs = 500
+    cells = [
+        sc.with_overrides({"guidance.los.k1": k1, "spacecraft.mass_kg": m})
+        for k1, m in itertools.product(*axes.values())
+    ]
+    hours = (
+        sum(gj.estimate_cost(c, runs).seconds for c in cells)
+        + len(cells) * envelope_module.CELL_OVERHEAD_S
+    ) / 3600
+    with pytest.raises(gj.ScenarioError, match=r"^cost: 9 cells of 500 runs, about .*; allowed"):
+        gj.envelope(sc, axes, runs=runs, progress=False, max_hours=0.999 * hours)
+    with pytest.raises(_Ran):
+        gj.envelope(sc, axes, runs=runs, progress=False, max_hours=1.001 * hours)
+
+    costed = []
+
+    def cost(scenario, runs, device=None):
+        costed.append(scenario)
+        return CostEstimate(runs, 1.0, 1, 1.0)
+
+    monkeypatch.setattr(envelope_module, "estimate_cost", cost)
+    big = {"guidance.los.k1": list(np.linspace(3, 5, 100)), "guidance.dt_s": [0.5] * 100}
+    with pytest.raises(gj.ScenarioError, match=r"^cost: 10000 cells of 2 runs, about 3 h \(2.8 h"):
+        gj.envelope(sc, big, runs=2, progress=False, max_hours=2.0)
+    assert len(costed) == envelope_module.COST_SAMPLE
+
+    monkeypatch.setattr(envelope_module, "_cell_scenarios", _no_study)
+    huge = {"guidance.los.k1": [4.0] * 2000, "guidance.los.k2": [1.0] * 1000}
+    with pytest.raises(gj.ScenarioError, match=r"^cost: 2000000 cells, more than 39 h at"):
+        gj.envelope(sc, huge, runs=2, progress=False)
+    assert len(costed) == envelope_module.COST_SAMPLE  # no cell built
 
 
 def test_cells_are_the_studies_of_their_scenarios(tmp_path):

@@ -56,15 +56,19 @@ def _where(q) -> None:
     )
 
 
-def _study_limits(q) -> None:
+def _max_hours(q, what: str = "a study") -> None:
     from ..montecarlo import MAX_HOURS
 
     q.add_argument(
         "--max-hours",
         type=_hours,
         default=MAX_HOURS,
-        help=f"refuse a study whose cost estimate exceeds this (default {MAX_HOURS:g} h)",
+        help=f"refuse {what} whose cost estimate exceeds this (default {MAX_HOURS:g} h)",
     )
+
+
+def _study_limits(q) -> None:
+    _max_hours(q)
     q.add_argument(
         "--max-failed",
         type=_fraction("--max-failed"),

@@ -178,6 +178,7 @@ def cmd_envelope(args) -> int:
             client=client,
             device=args.device,
             batch_cells=args.batch_cells,
+            max_hours=args.max_hours,
             **options,
         )
     finally:

@@ -4,6 +4,7 @@ import argparse
 
 from .arguments import (
     _device,
+    _max_hours,
     _number,
     _Parser,
     _positive_int,
@@ -131,6 +132,7 @@ def _add_envelope(sub) -> None:
         default=None,
         help="run the cells as one batch per compiled program (default: on a GPU)",
     )
+    _max_hours(q, "an envelope")
     _where(q)
     _device(q)
     q.set_defaults(func=cmd_envelope)
