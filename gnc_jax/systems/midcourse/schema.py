@@ -46,22 +46,24 @@ def check(cfg: dict) -> None:
                 "allowed: years 1900-2100"
             )
     t = epochs_s(cfg)
-    if not t["launch_epoch"] < t["first_fix_epoch"] < t["encounter_epoch"]:
+    # every fix, the first included, is more than a day before the encounter
+    latest = t["encounter_epoch"] - SECONDS_PER_DAY
+    if not t["launch_epoch"] < t["first_fix_epoch"] < latest:
         raise ScenarioError(
             f"mission.first_fix_epoch: {m['first_fix_epoch']!r}; allowed: after "
-            f"launch_epoch ({m['launch_epoch']}) and before encounter_epoch "
+            f"launch_epoch ({m['launch_epoch']}) and more than 1 day before encounter_epoch "
             f"({m['encounter_epoch']})"
         )
     last = fix_epochs_s(cfg)[-1]
-    if not last < t["encounter_epoch"] - SECONDS_PER_DAY:
-        days = (t["encounter_epoch"] - t["first_fix_epoch"]) / SECONDS_PER_DAY
+    if not last < latest:
+        days = (latest - t["first_fix_epoch"]) / SECONDS_PER_DAY
         nav = cfg["navigation"]
+        fixes = f"{nav['fixes']} fix{'' if nav['fixes'] == 1 else 'es'}"
         raise ScenarioError(
-            f"navigation.fixes: {nav['fixes']} fixes every {nav['interval_days']:g} days end "
+            f"navigation.fixes: {fixes} every {nav['interval_days']:g} days end "
             f"{(last - t['encounter_epoch']) / SECONDS_PER_DAY:+.1f} days from encounter; "
-            "allowed: the "
-            f"last fix at least 1 day before encounter, i.e. (fixes - 1) * interval_days < "
-            f"{days - 1.0:g}"
+            "allowed: the last fix more than 1 day before encounter, i.e. "
+            f"(fixes - 1) * interval_days < {days:g}"
         )
     if math.hypot(*m["aim_b_km"]) == 0.0:
         raise ScenarioError(

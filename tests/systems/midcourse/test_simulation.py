@@ -135,6 +135,16 @@ BAD_INPUT = [
     ({"mission.launch_epoch": "2007-02-30"}, "mission.launch_epoch: epoch '2007-02-30'"),
     ({"mission.encounter_epoch": "26/04/2008"}, "mission.encounter_epoch: epoch"),
     ({"mission.first_fix_epoch": "2008-05-01"}, "mission.first_fix_epoch: '2008-05-01'"),
+    (
+        {"mission.first_fix_epoch": "2008-04-25"},
+        "mission.first_fix_epoch: '2008-04-25'; allowed: after launch_epoch (2007-08-04) and "
+        "more than 1 day before encounter_epoch (2008-04-26)",
+    ),
+    (
+        {"navigation.fixes": 2, "navigation.interval_days": 237.0},
+        "navigation.fixes: 2 fixes every 237 days end -1.0 days from encounter; allowed: the "
+        "last fix more than 1 day before encounter, i.e. (fixes - 1) * interval_days < 237",
+    ),
     ({"mission.launch_epoch": "1850-01-01"}, "outside the ephemeris' span"),
     ({"mission.aim_b_km": [0.0, 0.0]}, "mission.aim_b_km: (0, 0) aims at the planet's centre"),
     ({"mission.reference_plane": "galactic"}, "mission.reference_plane: got 'galactic'"),
@@ -168,8 +178,9 @@ def test_bad_input_is_one_clear_line_before_compilation(override, message, capsy
     with pytest.raises(ScenarioError) as error:
         gj.load_scenario("phoenix-midcourse", overrides=override)
     assert message in str(error.value) and "allowed" in str(error.value)
-    ((key, value),) = override.items()
-    argv = ["run", "phoenix-midcourse", "--set", f"{key}={json.dumps(value)}"]
+    argv = ["run", "phoenix-midcourse"]
+    for key, value in override.items():
+        argv += ["--set", f"{key}={json.dumps(value)}"]
     assert cli.main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and err.startswith("gnc-jax: error: ")
