@@ -15,7 +15,8 @@ class Status(enum.IntEnum):
     no_convergence = 3  # an iteration (corrector, targeter) did not converge
     time_out = 4  # the run did not reach its terminal condition in the allotted time
     out_of_domain = 5  # the state left the model's domain (intercept: a B-plane miss larger
-    # than the initial range, a run that ends farther from the target than it started)
+    # than the initial range, a run that ends farther from the target than it started;
+    # midcourse: an error beyond the autonomous correction's upper threshold, for the ground)
     propellant = 6  # the engine needed more propellant than the vehicle carries (impactor and
     # intercept: spacecraft.propellant_kg)
     nav_lost = 7  # navigation lost the target (most images unused, or innovations persistently

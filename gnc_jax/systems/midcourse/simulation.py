@@ -333,7 +333,9 @@ def finish(
 ) -> MidcourseOutcome:
     """The coast to the encounter and the run's outcome, its status ``nan`` (not finite, or a
     coast between fixes failed), else the worse propagation status to the encounter, else
-    ``no_convergence``."""
+    ``no_convergence``, else ``out_of_domain`` when a fix was handed to the ground (its error
+    beyond the law's upper threshold: the autonomous correction did not deliver the run, and
+    its miss, uncorrected at that fix, is left out of the statistics)."""
     tally, x0, q0, status0 = state.tally, dispersion.x0, dispersion.q0, dispersion.status0
     if sim.guidance_enabled:
         t0 = sim.t_first_fix_s
@@ -380,6 +382,7 @@ def finish(
         (~tally.propagation_ok, Status.nan),
         (bad_status != Status.ok, bad_status),
         (tally.failed, Status.no_convergence),
+        (tally.ground_calls > 0, Status.out_of_domain),
     )
     return with_status(outcome, failures)
 

@@ -64,7 +64,8 @@ def _midcourse_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str,
         corrections_max=int(np.max(count)),
         correction_every_fix_pct=float(100.0 * np.mean(count == per_fix.shape[1])),
         iterations_mean=float(np.mean(o["iterations"][ok][count > 0])) if np.any(count) else 0.0,
-        ground_calls_total=int(np.sum(o["ground_calls"][ok])),
+        # over every run: a run with a fix handed to the ground reads out_of_domain
+        ground_calls_total=int(np.sum(o["ground_calls"])),
     )
 
 
@@ -80,8 +81,10 @@ def _b_plane_dispersion(plt, runs, ok, scenario):
         ax.scatter(bt, br, s=6, alpha=0.6, label=f"runs ({ok.sum()})")
         goal = plt.Circle((0, 0), goal_km, fill=False, color="r", label=f"goal {goal_km:g} km")
         ax.add_patch(goal)
-        rms = np.sqrt(np.mean(bt**2 + br**2)) if bt.size else np.nan
-        ax.set_title(f"{title}: |ΔB| RMS {rms:.4g} km")
+        if bt.size:
+            ax.set_title(f"{title}: |ΔB| RMS {np.sqrt(np.mean(bt**2 + br**2)):.4g} km")
+        else:
+            ax.set_title(f"{title}: no ok run ({len(ok)} failed)")
         ax.set_xlabel("ΔB_T (km)")
         ax.set_ylabel("ΔB_R (km)")
         ax.set_aspect("equal", adjustable="datalim")
@@ -187,8 +190,9 @@ def _dv_per_fix(plt, summary, runs, ok, scenario, sim):
     ax.set_ylabel("Δv per correction (m/s)")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
-    total = summary.get("dv_mean_mps", np.nan)
-    ax.set_title(f"{scenario.name}: Δv per correction (seed 001 Fig. 4); total {total:.4g} m/s")
+    total = summary.get("dv_mean_mps")
+    total = "no ok run" if total is None else f"total {total:.4g} m/s"
+    ax.set_title(f"{scenario.name}: Δv per correction (seed 001 Fig. 4); {total}")
     return fig
 
 

@@ -14,8 +14,10 @@ import pytest
 import gnc_jax as gj
 from gnc_jax import cli, montecarlo
 from gnc_jax.guidance.midcourse import AbstractMidcourseGuidance, AutonomousCorrection
+from gnc_jax.plotting import pyplot
 from gnc_jax.scenario import ScenarioError
 from gnc_jax.systems.midcourse import simulation as midcourse
+from gnc_jax.systems.midcourse import system as midcourse_system
 
 METHODS = {
     "autodiff": "phoenix-midcourse",
@@ -57,6 +59,27 @@ def test_errors_and_thresholds_are_arguments_of_the_compiled_study():
     assert again.compile_s == 0.0
     rms = lambda x: np.sqrt(np.mean(x**2))
     assert rms(again.outcomes["b0_err_m"]) < 0.7 * rms(study.outcomes["b0_err_m"])
+    # an upper threshold below every run's miss hands every run to the ground: none is
+    # delivered autonomously, each reads out_of_domain and no statistic averages them in
+    assert np.all(study.outcomes["b0_err_m"] > 100e3)
+    ground = gj.run_study(
+        scenario.with_overrides({"guidance.autonomous.upper_b_km": 100.0}),
+        runs=CI_RUNS,
+        seed=0,
+        progress=False,
+    )
+    assert ground.compile_s == 0.0
+    np.testing.assert_array_equal(ground.outcomes["status"], gj.Status.out_of_domain)
+    np.testing.assert_array_equal(ground.outcomes["ground_calls"], 1)
+    np.testing.assert_array_equal(ground.outcomes["corrections"], 0)
+    s = ground.summary()
+    assert s["failed_by_status"] == {"out_of_domain": CI_RUNS} and "b_err_km_rms" not in s
+    ok = ground.outcomes["status"] == gj.Status.ok
+    figure = midcourse_system._b_plane_dispersion(pyplot(), ground.outcomes, ok, scenario)
+    assert [ax.get_title() for ax in figure.axes] == [
+        f"before correction: no ok run ({CI_RUNS} failed)",
+        f"after: no ok run ({CI_RUNS} failed)",
+    ]
 
 
 def test_the_simulator_executes_the_law_step():
