@@ -391,3 +391,15 @@ def propagate_to_encounter_with_stm(
         model, _variational_field, sol, lambda y: y[0]
     )
     return Encounter(t, x, r_rel, v_rel, status), phi
+
+
+def steps_to_encounter(
+    model: HeliocentricModel, t0_s, y0: Float[Array, "6"], t_max_s
+) -> tuple[Array, Array]:
+    """``(steps, exhausted)`` of `propagate_to_encounter`'s solve from ``y0``: the integrator
+    steps it takes to the closest approach (accepted and rejected, what ``max_steps`` bounds)
+    and whether it stopped at ``model.max_steps`` before the encounter or ``t_max_s``."""
+    event = _encounter_event(model, lambda y: y)
+    t0 = jnp.asarray(t0_s, float)
+    sol = _solve(model, vector_field, t0, jnp.asarray(t_max_s, float), y0, event)
+    return sol.stats["num_steps"], sol.result == diffrax.RESULTS.max_steps_reached

@@ -8,9 +8,10 @@ from ..._types import Vector3
 from ...dynamics.ephemeris import ECLIPTIC_POLE_EQUATORIAL, GM_PLANETS, planet_index, planet_state
 from ...dynamics.heliocentric import SOLAR_PRESSURE_1AU, EphemerisTable, HeliocentricModel
 from ...geometry.bplane import BPlaneError
+from ...params import schema_of
 from ...schema import ScenarioError
-from .nominal import design_nominal
-from .params import MidcourseParameters, parameters
+from .nominal import StepBudgetError, design_nominal
+from .params import Dynamics, MidcourseParameters, parameters
 from .simulation import MidcourseSimulation
 
 
@@ -87,6 +88,16 @@ def build(scenario) -> MidcourseSimulation:
     except BPlaneError as error:
         raise ScenarioError(
             f"mission.reference_plane: {p.mission.reference_plane!r}: {error}"
+        ) from None
+    except StepBudgetError as error:
+        allowed = schema_of(Dynamics)["max_steps"].allowed()
+        enough = (
+            f"more than {error.max_steps}"
+            if error.needed is None
+            else f"at least {error.needed} (dispersed runs may need more)"
+        )
+        raise ScenarioError(
+            f"dynamics.max_steps: {error}; allowed: {allowed}, {enough}, or a looser dynamics.rtol"
         ) from None
     except ValueError as error:
         raise ScenarioError(

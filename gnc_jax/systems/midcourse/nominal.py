@@ -1,15 +1,18 @@
 """The nominal transfer of a midcourse scenario: a Lambert conic from Earth to Mars,
 retargeted in the full force model to the aim point (seed 001 §4's reference trajectory)."""
 
+import dataclasses
 from typing import NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ..._types import Vector3
 from ...constants import SECONDS_PER_DAY
 from ...dynamics.ephemeris import GM_SUN, planet_index, planet_state
+from ...dynamics.heliocentric import HeliocentricModel, steps_to_encounter
 from ...geometry.bplane import check_b_plane_frame
 from ...geometry.kepler import propagate_kepler
 from ...geometry.lambert import solve_lambert
@@ -27,6 +30,49 @@ class NominalTransfer(NamedTuple):
     c3_km2s2: float  # launch energy of the Lambert conic
     v_inf_arrival_mps: float  # arrival excess speed of the Lambert conic
     design_iterations: int
+
+
+STEP_PROBE = 1_000_000
+"""Step budget with which a nominal transfer that could not be targeted is targeted again, to
+tell a step budget that ran out from an infeasible transfer (the upper bound of
+``dynamics.max_steps``)."""
+
+
+class StepBudgetError(ValueError):
+    """The integrator's step budget (``max_steps``) runs out before the encounter while the
+    nominal transfer is targeted. ``needed``: the steps the targeted transfer takes from the
+    first fix to the encounter (``None`` when that is within the budget: an intermediate
+    Newton iterate needed more)."""
+
+    def __init__(self, max_steps: int, needed: int | None):
+        self.max_steps, self.needed = max_steps, needed
+        super().__init__(
+            f"{max_steps} integrator steps do not reach the encounter; the targeted nominal "
+            f"transfer takes {needed} from the first fix"
+            if needed is not None
+            else f"{max_steps} integrator steps do not reach the encounter from every Newton "
+            f"iterate of the nominal transfer's targeting ({STEP_PROBE} do)"
+        )
+
+
+@eqx.filter_jit
+def _steps(model: HeliocentricModel, t0_s, y0, t_max_s):
+    return steps_to_encounter(model, t0_s, y0, t_max_s)
+
+
+def _check_step_budget(design: MidcourseSimulation, targeter: NewtonTargeter) -> None:
+    """Raise `StepBudgetError` when ``design`` (whose targeting did not converge) converges
+    with a budget of `STEP_PROBE` steps."""
+    model = design.model
+    if model.max_steps >= STEP_PROBE:
+        return
+    probe = dataclasses.replace(design, model=dataclasses.replace(model, max_steps=STEP_PROBE))
+    result = _retarget(probe, targeter)
+    if not bool(result.converged):
+        return
+    x = jnp.concatenate([design.r0_m, design.v0_mps + result.p])
+    steps, _ = _steps(probe.model, design.t_first_fix_s, x, design.t_max_s)
+    raise StepBudgetError(model.max_steps, int(steps) if int(steps) > model.max_steps else None)
 
 
 @eqx.filter_jit
@@ -49,7 +95,9 @@ def design_nominal(sim: MidcourseSimulation, t_launch_s: float) -> NominalTransf
 
     ``sim`` supplies the model, epochs and aim (its r0/v0 are ignored). Results are cached per
     process, keyed by every input. Raises `BPlaneError` when the arrival asymptote is parallel
-    to the reference normal and ``ValueError`` when step 3 does not converge.
+    to the reference normal, `StepBudgetError` when step 3 does not converge because a
+    propagation to the encounter needs more than the model's ``max_steps`` steps (it converges
+    with `STEP_PROBE`), and ``ValueError`` when it does not converge otherwise.
     """
     # Only the model, epochs, aim and reference plane matter; everything else is reset so that
     # every scenario variant shares one compiled design function and one cached result.
@@ -83,6 +131,8 @@ def design_nominal(sim: MidcourseSimulation, t_launch_s: float) -> NominalTransf
     result = _retarget(design, targeter)
     if not bool(result.converged):
         miss = jax.device_get(result.q - aim3)
+        if not np.all(np.isfinite(miss)):  # a propagation failed (its step budget ran out?)
+            _check_step_budget(design, targeter)
         raise ValueError(
             "the nominal transfer could not be targeted to the aim point in the full model "
             f"(residual B_R, B_T, t = {miss[0]:.3g} m, {miss[1]:.3g} m, {miss[2]:.3g} s)"
@@ -101,4 +151,4 @@ def design_nominal(sim: MidcourseSimulation, t_launch_s: float) -> NominalTransf
     return nominal
 
 
-__all__ = ["NominalTransfer", "design_nominal"]
+__all__ = ["NominalTransfer", "STEP_PROBE", "StepBudgetError", "design_nominal"]

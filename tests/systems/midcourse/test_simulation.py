@@ -4,7 +4,9 @@ findings, recompilation, failure accounting, bad input and the CLI report.
 Batching, chunking and the per-run loop are checked for every system and law by
 tests/test_family.py (to the system's ``batch_tolerance``)."""
 
+import dataclasses
 import json
+import re
 
 import jax
 import jax.numpy as jnp
@@ -13,9 +15,14 @@ import pytest
 
 import gnc_jax as gj
 from gnc_jax import cli, montecarlo
-from gnc_jax.guidance.midcourse import AbstractMidcourseGuidance, AutonomousCorrection
+from gnc_jax.guidance.midcourse import (
+    AbstractMidcourseGuidance,
+    AutonomousCorrection,
+    TargetingResult,
+)
 from gnc_jax.plotting import pyplot
 from gnc_jax.scenario import ScenarioError
+from gnc_jax.systems.midcourse import nominal
 from gnc_jax.systems.midcourse import simulation as midcourse
 from gnc_jax.systems.midcourse import system as midcourse_system
 
@@ -208,6 +215,36 @@ def test_bad_input_is_one_clear_line_before_compilation(override, message, capsy
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and err.startswith("gnc-jax: error: ")
     assert message in err
+
+
+def test_a_step_budget_short_of_the_transfer_names_max_steps(monkeypatch):
+    """A nominal that cannot be targeted within ``dynamics.max_steps`` (but can with
+    ``STEP_PROBE``) is refused naming that field and the steps the targeted transfer takes:
+    the cost model's measured 149 dopri8 steps from the first fix to the encounter. The
+    targeting at the short budget is stubbed out as failed (NaN, as a budget that ran out
+    leaves it), and the probe's targeting is the default budget's, whose compiled program the
+    other tests share."""
+    retarget = nominal._retarget
+
+    def stub(design, targeter):
+        if design.model.max_steps < nominal.STEP_PROBE:
+            nan = jnp.full(3, jnp.nan)
+            return TargetingResult(nan, nan, nan, jnp.zeros((3, 3)), 0, jnp.array(False))
+        default = dataclasses.replace(design.model, max_steps=4096)
+        return retarget(dataclasses.replace(design, model=default), targeter)
+
+    monkeypatch.setattr(nominal, "_retarget", stub)
+    scenario = gj.load_scenario("phoenix-midcourse", overrides=["dynamics.max_steps=100"])
+    with pytest.raises(ScenarioError) as error:
+        gj.build(scenario)
+    message = str(error.value)
+    assert message.startswith(
+        "dynamics.max_steps: 100 integrator steps do not reach the encounter; the targeted "
+        "nominal transfer takes "
+    )
+    needed = int(re.search(r"takes (\d+) from the first fix", message).group(1))
+    assert needed == pytest.approx(midcourse_system._ARC_STEPS["dopri8"], rel=0.05)
+    assert f"allowed: an integer in [16, 1e+06], at least {needed} (dispersed" in message
 
 
 @pytest.mark.slow
