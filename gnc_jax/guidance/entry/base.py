@@ -182,9 +182,10 @@ class AbstractEntryGuidance(AbstractGuidanceLaw):
 
     What the capsule system needs from a law it asks through the family's class methods,
     never by the law's field names: whether the law tracks a designed second-entry reference
-    (:meth:`reference_switch_load_g`; the system then designs it for the scenario), the law's
-    checks against the entry interface (:meth:`check_entry`) and the predictor's cost
-    (:meth:`prediction_steps`). It hands the law's ``from_config`` an
+    (:meth:`reference_switch_load_g`; the system then designs it for the scenario), the
+    largest load its predictions fly (:meth:`predicted_load_limit_g`, which bounds the direct
+    reach), the law's checks against the entry interface (:meth:`check_entry`) and the
+    predictor's cost (:meth:`prediction_steps`). It hands the law's ``from_config`` an
     :class:`~gnc_jax.guidance.entry.reference.EntryMission` (SI units, the reference included)
     as ``ctx``.
     """
@@ -203,6 +204,14 @@ class AbstractEntryGuidance(AbstractGuidanceLaw):
         """The entry mode the law's scenario ``section`` asks of the reference design:
         "skip", "direct" or "auto" (the design chooses from the reach). Default: "skip"."""
         return "skip"
+
+    @classmethod
+    def predicted_load_limit_g(cls, section: dict) -> float | None:
+        """The largest sensed load (g) the law's on-board predictions fly, read from its
+        scenario ``section``: a predicted profile beyond it is not one the law commands, so
+        the direct reach (:mod:`~gnc_jax.guidance.entry.direct`) leaves out the constant-bank
+        landings whose load exceeds it. ``None`` (the default): no such limit."""
+        return None
 
     @classmethod
     def check_entry(cls, section: dict, entry_altitude_m: float) -> None:

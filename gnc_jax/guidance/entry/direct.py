@@ -9,7 +9,8 @@ crossrange inside the speed-scheduled funnel of the second entry.
 
 The direct reach of a vehicle, entry and target is the interval of chute ranges of the nominal
 flown with a constant bank in ``DIRECT_BANK_BOUNDS_RAD`` that lands without climbing above
-``DIRECT_APOGEE_M`` after its first pull-up (:func:`direct_reach`). The design
+``DIRECT_APOGEE_M`` after its first pull-up and with a sensed load within
+``DIRECT_LOAD_FRACTION`` of the law's prediction limit (:func:`direct_reach`). The design
 (:func:`design_direct`) is the constant bank whose nominal lands on the target, a bounded
 regula-falsi solve inside the scanned pair of banks that brackets it; its
 :class:`~gnc_jax.guidance.entry.reference.ReferenceTrajectory` (:func:`direct_reference`)
@@ -48,35 +49,56 @@ DIRECT_SCAN_STEP_RAD = math.radians(0.5)
 # lofts to 56 km at a constant 85 deg bank (2112 km), 65 km at 80 deg (2730 km) and 90 km at
 # 75 deg (5099 km).
 DIRECT_APOGEE_M = 70.0e3
+# The law's predictor ends a prediction whose load exceeds its limit (predictor_dive_load_g,
+# 20 g) short, as a dive, so its corrector never settles on a steeper bank: at -5.9 deg the
+# packaged capsule's constant banks land down to 1144 km at 165 deg with a 45 g peak, but
+# the undispersed closed loop flew a 1200 km target 122 km long (the corrector failing in 27
+# of 30 cycles). Near the limit part of the predictions already read as dives (at 20 g:
+# 1347 km, 2 of 32 cycles failed; -5.3 deg, 2058 km: 26 of 50 and 21 km long); within 90 %
+# of it the undispersed closed loop converged in every cycle and landed within 3.6 km at the
+# reach's end from -7.1 to -5.3 deg, at 10.5 and 11.5 km/s, 7 and 11 t, and L/D 0.26 to 0.38
+# (L/D 0.23 lands 10.6 km long there at -5.9 deg, and up to 27 km long at -5.3 deg).
+DIRECT_LOAD_FRACTION = 0.9
 
 
 class DirectScan(NamedTuple):
     """The constant-bank nominals of the scan: banks (rad), chute range errors (m, > 0
-    beyond the target) and whether each is a direct landing."""
+    beyond the target), whether each is a direct landing, and the load limit (g) a direct
+    landing kept within."""
 
     banks: np.ndarray
     err_m: np.ndarray
     direct: np.ndarray
+    load_limit_g: float = math.inf
 
 
 @jax.jit
-def _constant_bank_flights(problem: NominalProblem, banks):
+def _constant_bank_flights(problem: NominalProblem, banks, load_limit_g):
     def one(bank):
         flight = fly_nominal(problem, bank, bank, bank, V_SWITCH_INIT_MPS)
         # a flight that never pulls up has apogee 0; one that skips (phase 2) recorded the
         # apogee of its first pull-up
         lands = flight.done & ((fate_of(flight) == LANDS_WITHOUT_SKIP) | (flight.apogee > 0.0))
-        return range_error_m(problem, flight), lands & (flight.apogee < DIRECT_APOGEE_M)
+        within = (flight.apogee < DIRECT_APOGEE_M) & (flight.peak_load_g <= load_limit_g)
+        return range_error_m(problem, flight), lands & within
 
     return jax.vmap(one)(banks)
 
 
-def scan_direct(problem: NominalProblem) -> DirectScan:
-    """The constant-bank nominals every ``DIRECT_SCAN_STEP_RAD`` over ``DIRECT_BANK_BOUNDS_RAD``."""
+def scan_direct(problem: NominalProblem, load_limit_g: float | None = None) -> DirectScan:
+    """The constant-bank nominals every ``DIRECT_SCAN_STEP_RAD`` over ``DIRECT_BANK_BOUNDS_RAD``;
+    a direct landing's sensed load stays within ``DIRECT_LOAD_FRACTION`` of ``load_limit_g``
+    (g; the law's
+    :meth:`~gnc_jax.guidance.entry.base.AbstractEntryGuidance.predicted_load_limit_g`,
+    ``None``: no limit)."""
     lo, hi = DIRECT_BANK_BOUNDS_RAD
     banks = np.append(np.arange(lo, hi, DIRECT_SCAN_STEP_RAD), hi)
-    err_m, direct = (np.asarray(x) for x in _constant_bank_flights(problem, jnp.asarray(banks)))
-    return DirectScan(banks, err_m, direct)
+    limit = math.inf if load_limit_g is None else DIRECT_LOAD_FRACTION * float(load_limit_g)
+    err_m, direct = (
+        np.asarray(x)
+        for x in _constant_bank_flights(problem, jnp.asarray(banks), jnp.asarray(limit))
+    )
+    return DirectScan(banks, err_m, direct, limit)
 
 
 def direct_reach(scan: DirectScan) -> tuple[float, float] | None:
@@ -107,11 +129,28 @@ def _solve_direct_bank(problem: NominalProblem, lo, hi, guess):
     ).x
 
 
-def reach_text(reach_m, entry: dict) -> str:
+def reach_text(scan: DirectScan, entry: dict) -> str:
+    """The direct reach of ``scan`` as ranges (km) of the scenario's ``entry`` section."""
+    reach_m = direct_reach(scan)
     if reach_m is None:
-        return "no constant bank lands without a skip"
+        return "no range"
     lo, hi = reach_m
     return f"{entry['range_km'] + lo / 1e3:.0f} .. {entry['range_km'] + hi / 1e3:.0f} km"
+
+
+def direct_conditions(scan: DirectScan) -> str:
+    """What makes a flight of ``scan`` a direct landing, in words."""
+    b_lo, b_hi = (math.degrees(b) for b in DIRECT_BANK_BOUNDS_RAD)
+    load = (
+        ""
+        if math.isinf(scan.load_limit_g)
+        else f", loads up to {scan.load_limit_g:.3g} g = {DIRECT_LOAD_FRACTION:.0%} of the "
+        "law's prediction limit"
+    )
+    return (
+        f"constant banks {b_lo:.0f}..{b_hi:.0f} deg, no climb above "
+        f"{DIRECT_APOGEE_M / 1e3:.0f} km{load}"
+    )
 
 
 def design_direct(problem: NominalProblem, entry: dict, vehicle: dict, scan=None) -> float:
@@ -120,12 +159,10 @@ def design_direct(problem: NominalProblem, entry: dict, vehicle: dict, scan=None
     scan = scan_direct(problem) if scan is None else scan
     i = _bracket(scan)
     if i is None:
-        b_lo, b_hi = (math.degrees(b) for b in DIRECT_BANK_BOUNDS_RAD)
         raise ScenarioError(
             f"entry.range_km: {entry['range_km']:g} km; allowed: "
-            f"{reach_text(direct_reach(scan), entry)}, the chute ranges of a direct entry "
-            f"(constant banks {b_lo:.0f}..{b_hi:.0f} deg, no climb above "
-            f"{DIRECT_APOGEE_M / 1e3:.0f} km; {conditions(entry, vehicle)})"
+            f"{reach_text(scan, entry)}, the chute ranges of a direct entry "
+            f"({direct_conditions(scan)}; {conditions(entry, vehicle)})"
         )
     lo, hi = scan.banks[i], scan.banks[i + 1]
     e0, e1 = scan.err_m[i], scan.err_m[i + 1]

@@ -74,6 +74,7 @@ class NominalFlight(NamedTuple):
     t_switch: Scalar
     peak2: Scalar  # log-sum-exp accumulator of the second-entry load
     apogee: Scalar
+    peak_load_g: Scalar  # largest sensed load before the chute, at the steps' starts
 
 
 def fly_nominal(problem: NominalProblem, sigma_1, sigma_a, sigma_b, v_switch, beta=8.0):
@@ -121,6 +122,7 @@ def fly_nominal(problem: NominalProblem, sigma_1, sigma_a, sigma_b, v_switch, be
             t_switch,
             peak2,
             jnp.maximum(c.apogee, jnp.where(phase == 1, alt0, 0.0)),
+            jnp.maximum(c.peak_load_g, jnp.where(c.done, 0.0, ng)),
         ), None
 
     z = jnp.zeros(())
@@ -132,6 +134,7 @@ def fly_nominal(problem: NominalProblem, sigma_1, sigma_a, sigma_b, v_switch, be
         problem.entry,
         z,
         problem.entry,
+        z,
         z,
         z,
         z,

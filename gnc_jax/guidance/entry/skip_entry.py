@@ -94,6 +94,12 @@ class SkipEntryGuidance(SkipEntryParameters):
         return section["kepler_load_g"]
 
     @classmethod
+    def predicted_load_limit_g(cls, section) -> float:
+        """``predictor_dive_load_g`` of ``section``: a prediction whose load exceeds it ends
+        short as a dive, so the corrector never settles on such a profile."""
+        return section["predictor_dive_load_g"]
+
+    @classmethod
     def entry_mode_of(cls, section) -> str:
         """The entry mode ``section`` asks for ("auto", "skip" or "direct")."""
         return section["entry_mode"]

@@ -13,6 +13,7 @@ from ...guidance.entry.base import AbstractEntryGuidance, EntryModel
 from ...guidance.entry.cache import reference_for
 from ...guidance.entry.direct import (
     design_direct,
+    direct_conditions,
     direct_reach,
     direct_reference,
     reach_text,
@@ -76,20 +77,29 @@ def law_mission(
     load = law.reference_switch_load_g(section)
     if load is None:
         return EntryMission(chute_altitude_m=sim.chute_altitude_m)
-    reference, mode = mode_reference(config, sim, load, law.entry_mode_of(section))
+    reference, mode = mode_reference(
+        config, sim, load, law.entry_mode_of(section), law.predicted_load_limit_g(section)
+    )
     return EntryMission(chute_altitude_m=sim.chute_altitude_m, reference=reference, entry_mode=mode)
 
 
-def mode_reference(config: dict, sim: CapsuleSimulation, switch_load_g: float, mode: str):
+def mode_reference(
+    config: dict,
+    sim: CapsuleSimulation,
+    switch_load_g: float,
+    mode: str,
+    load_limit_g: float | None = None,
+):
     """The reference of the entry ``mode`` and the mode resolved: "skip" (the designed
     second-entry reference of :func:`scenario_reference`), "direct" (the constant-bank direct
     design of :mod:`gnc_jax.guidance.entry.direct`), or "auto": "direct" where the target
     lies inside the nominal vehicle's direct reach, else "skip" (a skip that cannot reach
-    either is refused with both intervals)."""
+    either is refused with both intervals). ``load_limit_g``: the largest load (g) the law's
+    predictions fly (``None``: none), which bounds the direct reach."""
     if mode == "skip":
         return scenario_reference(config, sim, switch_load_g), "skip"
     problem = nominal_problem(config, sim, switch_load_g)
-    scan = scan_direct(problem)
+    scan = scan_direct(problem, load_limit_g)
     reach = direct_reach(scan)
     inside = reach is not None and reach[0] <= 0.0 <= reach[1]
     if mode == "direct" or inside:
@@ -104,5 +114,6 @@ def mode_reference(config: dict, sim: CapsuleSimulation, switch_load_g: float, m
         return scenario_reference(config, sim, switch_load_g), "skip"
     except ScenarioError as e:
         raise ScenarioError(
-            f"{e}; a direct entry reaches {reach_text(reach, config['entry'])}"
+            f"{e}; a direct entry reaches {reach_text(scan, config['entry'])} "
+            f"({direct_conditions(scan)})"
         ) from None

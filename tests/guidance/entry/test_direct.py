@@ -15,16 +15,21 @@ from gnc_jax.guidance.entry import direct
 from gnc_jax.guidance.entry.base import flight_variables
 from gnc_jax.schema import ScenarioError
 from gnc_jax.systems.capsule import simulation as capsule_sim
-from gnc_jax.systems.capsule.reference import mode_reference, nominal_problem
+from gnc_jax.systems.capsule.reference import law_mission, mode_reference, nominal_problem
 
 # every dispersion of the capsule off (its scenario schema lists them)
 ZERO = [f"dispersions.{k}=0.0" for k in gj.get_system("capsule").schema()["dispersions"]]
 
 
-def _setup(range_km):
-    sc = gj.load_scenario("lunar-skip-entry", overrides=[f"entry.range_km={range_km}"])
+def _setup(range_km, overrides=()):
+    sc = gj.load_scenario("lunar-skip-entry", overrides=[f"entry.range_km={range_km}", *overrides])
     sim = capsule_sim.build(sc)
     return sc, sim, nominal_problem(sc.config, sim, 0.2)
+
+
+def _law_load_limit_g(sc) -> float:
+    law = gj.get_system("capsule").laws()["skip_entry"]
+    return law.predicted_load_limit_g(sc.config["guidance"]["skip_entry"])
 
 
 def _track_range_km(u, start, azimuth, r_e_km):
@@ -118,6 +123,16 @@ def test_refusals_name_the_field_and_the_interval():
     msg = str(e.value)
     assert msg.startswith("entry.range_km: 800 km") and "\n" not in msg
     assert f"a direct entry reaches {lo:.0f} .. {hi:.0f} km" in msg
+    # 1200 km: landed by constant banks steeper than 112 deg, whose loads (up to 45 g) the
+    # law's predictions end as dives; the law's reach starts beyond it
+    sc, sim, _ = _setup(1200.0, ["guidance.skip_entry.entry_mode=direct"])
+    law = gj.get_system("capsule").laws()["skip_entry"]
+    with pytest.raises(ScenarioError) as e:
+        law_mission(law, sc.config, sim)
+    msg = str(e.value)
+    assert msg.startswith("entry.range_km: 1200 km; allowed: ") and "\n" not in msg
+    short = float(re.search(r"allowed: (\d+) \.\. ", msg).group(1))
+    assert short > 1200.0 and "loads up to 18 g" in msg
     with pytest.raises(ScenarioError) as e:
         gj.load_scenario("lunar-skip-entry", overrides=["guidance.skip_entry.entry_mode=glide"])
     msg = str(e.value)
@@ -126,7 +141,8 @@ def test_refusals_name_the_field_and_the_interval():
 
 def test_a_direct_flight_lands_on_target():
     """Two undispersed direct-mode runs at 2000 km: no skip (no switch point), the chute
-    within the direct corrector's tolerance of the target."""
+    within the direct corrector's tolerance of the target; at the short end of the law's
+    direct reach, within the delivery tolerance (simulation.miss_limit_km)."""
     sc = gj.load_scenario(
         "lunar-skip-entry", overrides=["entry.range_km=2000", "simulation.max_time_s=1500"] + ZERO
     )
@@ -134,3 +150,10 @@ def test_a_direct_flight_lands_on_target():
     assert s["failed"] == 0 and s["switch_speed_mps_mean"] == 0.0
     assert s["skip_apogee_km_mean"] == 0.0
     assert abs(s["downrange_err_km"]["max"]) < 1.5 and abs(s["downrange_err_km"]["min"]) < 1.5
+    problem = _setup(2000.0)[2]
+    lo, _ = direct.direct_reach(direct.scan_direct(problem, _law_load_limit_g(sc)))
+    short = sc.with_overrides([f"entry.range_km={np.ceil(2000.0 + lo / 1e3):g}"])
+    s = gj.run_study(short, runs=2, seed=0, progress=False).summary()
+    limit = sc.config["simulation"]["miss_limit_km"]
+    assert s["failed"] == 0 and s["switch_speed_mps_mean"] == 0.0
+    assert abs(s["downrange_err_km"]["max"]) < limit and abs(s["downrange_err_km"]["min"]) < limit
