@@ -183,20 +183,32 @@ def design_by_profile(
     """The design of :mod:`gnc_jax.guidance.entry.profile_solve`: sigma_1 fixed inside the
     window of banks that skip and land, the range met by a constant second-entry bank
     (``sigma_a = sigma_b``). Refuses (:class:`ScenarioError`, naming ``entry.range_km``) a
-    target no first-entry bank brackets, with the chute ranges the design reaches.
-    ``bounds``: (first-entry, second-entry) bank bounds (rad); default the design's own."""
+    target no first-entry bank brackets, with the chute ranges the design reaches (one or
+    more intervals). ``bounds``: (first-entry, second-entry) bank bounds (rad); default the
+    design's own."""
     sigma_1, a, b = solve_profile_design(problem, *(bounds or ()))
-    if sigma_1 is None:
+    if sigma_1 is None:  # a: the chute range errors the scan brackets (m, intervals)
+        lo2, hi2 = (math.degrees(x) for x in (PROFILE_BOUNDS_RAD if bounds is None else bounds[1]))
         reach = (
-            "no nominal of its scan skips and lands"
-            if math.isnan(a)
-            else f"{entry['range_km'] + a / 1e3:.0f} .. {entry['range_km'] + b / 1e3:.0f} km"
+            _intervals_text(a, entry["range_km"])
+            if a
+            else "none: no first-entry bank skips and lands with every second-entry bank "
+            f"from {lo2:.0f} to {hi2:.0f} deg"
         )
         raise ScenarioError(
             f"entry.range_km: {entry['range_km']:g} km; allowed: a range the reference design "
             f"reaches with a skip ({reach}; {conditions(entry, vehicle)})"
         )
     return DesignResult(sigma_1, a, a, b, [])
+
+
+def _intervals_text(intervals_m, range_km: float) -> str:
+    """Chute range errors (m) as ranges (km): "a .. b km", "a .. b or c .. d km",
+    "a .. b, c .. d or e .. f km"."""
+    parts = [f"{range_km + lo / 1e3:.0f} .. {range_km + hi / 1e3:.0f}" for lo, hi in intervals_m]
+    if len(parts) > 1:
+        parts = [", ".join(parts[:-1]) + " or " + parts[-1]]
+    return f"{parts[0]} km"
 
 
 def design_at_the_edge(

@@ -20,8 +20,10 @@ constant second-entry bank sigma_2 in ``PROFILE_BOUNDS_RAD``:
 * sigma_2 is the root of "chute on the target", a bounded regula-falsi solve.
 
 Where no first-entry bank brackets the target, :func:`solve_profile_design` returns the chute
-ranges its scan reached (the reachable interval the refusal states). Its bank bounds are
-arguments: the design at the footprint's edge
+ranges its scan brackets (:func:`reachable_intervals`, what the refusal states): one interval
+per usable first-entry bank, and their union need not be one interval (near the overshoot
+boundary a 0.25 deg step of sigma_1 moves the chute range by more than the second-entry bank
+does). Its bank bounds are arguments: the design at the footprint's edge
 (:func:`~gnc_jax.guidance.entry.design.design_at_the_edge`) scans wider ones.
 """
 
@@ -85,16 +87,39 @@ def choose_first_entry_bank(err_m: np.ndarray, fate: np.ndarray) -> int | None:
     return int(rows[np.lexsort((np.abs(roots - math.pi / 2), -depth))[0]])
 
 
+def reachable_intervals(err_m: np.ndarray, fate: np.ndarray) -> list[tuple[float, float]]:
+    """The chute range errors (m) for which :func:`choose_first_entry_bank` finds a row, as
+    disjoint intervals in increasing order: the union of ``[err_m[i, -1], err_m[i, 0]]`` over
+    the rows ``i`` that skip and land at every scanned second-entry bank. The scan's flights
+    do not depend on the target's range (it lies on the entry's track), so a target ``d`` m
+    farther shifts every error by ``-d`` and is bracketed exactly when ``d`` lies in one of
+    these intervals."""
+    lands = (fate == SKIP_LANDS).all(axis=1)
+    spans = sorted(
+        (float(err_m[i, -1]), float(err_m[i, 0]))
+        for i in np.flatnonzero(lands)
+        if err_m[i, 0] >= err_m[i, -1]
+    )
+    merged: list[tuple[float, float]] = []
+    for lo, hi in spans:
+        if merged and lo <= merged[-1][1]:
+            merged[-1] = (merged[-1][0], max(merged[-1][1], hi))
+        else:
+            merged.append((lo, hi))
+    return merged
+
+
 def solve_profile_design(
     problem: NominalProblem,
     first_entry_bounds=SIGMA_1_BOUNDS_RAD,
     profile_bounds=PROFILE_BOUNDS_RAD,
 ):
     """``(sigma_1, sigma_2, v_switch)`` of the design described in the module docstring, or
-    ``(None, reach_lo_m, reach_hi_m)``: no first-entry bank brackets the target; the chute
-    range errors (m, along track, > 0 beyond the target) of the scanned nominals that skip
-    and land span reach_lo_m .. reach_hi_m (NaN when none does). ``first_entry_bounds``,
-    ``profile_bounds``: the banks (rad) sigma_1 and sigma_2 are sought within."""
+    ``(None, reach_m, None)``: no first-entry bank brackets the target; ``reach_m`` the
+    chute range errors (m, along track, > 0 beyond the target) the scan brackets
+    (:func:`reachable_intervals`; empty when no row skips and lands at every scanned
+    second-entry bank). ``first_entry_bounds``, ``profile_bounds``: the banks (rad) sigma_1
+    and sigma_2 are sought within."""
     lo, hi = first_entry_bounds
     banks = np.append(np.arange(lo, hi, FIRST_ENTRY_SCAN_STEP_RAD), hi)
     scan = (
@@ -106,10 +131,7 @@ def solve_profile_design(
     err_m, fate = (np.asarray(x) for x in flights)
     row = choose_first_entry_bank(err_m, fate)
     if row is None:
-        landed = err_m[fate == SKIP_LANDS]
-        if landed.size == 0:
-            return None, math.nan, math.nan
-        return None, float(landed.min()), float(landed.max())
+        return None, reachable_intervals(err_m, fate), None
     guess = float(np.interp(0.0, -err_m[row], scan))
     s2, v_switch = _solve_profile_bank(
         problem, jnp.asarray(banks[row]), jnp.asarray(guess), *map(jnp.asarray, profile_bounds)

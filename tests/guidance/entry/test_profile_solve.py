@@ -47,6 +47,32 @@ def test_the_first_entry_bank_choice_matches_brute_force():
         assert profile_solve.choose_first_entry_bank(err, fate) == _brute_force_row(err, fate)
 
 
+def test_the_reachable_intervals_are_where_the_choice_brackets_a_target():
+    """A target ``d`` m beyond the scan's has a row (choose_first_entry_bank on the errors
+    less ``d``) exactly when ``d`` lies in one of reachable_intervals, which are disjoint and
+    increasing."""
+    rng = np.random.default_rng(5)
+    m = profile_solve.PROFILE_SCAN_RAD.size
+    shifts = np.linspace(-7e6, 7e6, 281)
+    for _ in range(100):
+        n = int(rng.integers(3, 12))
+        level = rng.normal(0.0, 2e6, size=(n, 1))
+        err = level - np.sort(rng.uniform(0, 4e6, size=(n, m)), axis=1)
+        err += np.linspace(1.5e6, 0.0, m)
+        fate = np.where(rng.random((n, m)) < 0.1, nominal.NEVER_LANDS, nominal.SKIP_LANDS)
+        spans = profile_solve.reachable_intervals(err, fate)
+        assert all(a[1] < b[0] for a, b in zip(spans, spans[1:]))
+        for d in shifts:
+            found = profile_solve.choose_first_entry_bank(err - d, fate) is not None
+            assert found == any(lo <= d <= hi for lo, hi in spans)
+
+
+def _spans_km(text: str) -> list[tuple[float, float]]:
+    """The intervals "a .. b, c .. d or e .. f km" a refusal states in its parentheses."""
+    reach = re.search(r"\(([\d .,or]+) km;", text).group(1)
+    return [(float(a), float(b)) for a, b in re.findall(r"(\d+) \.\. (\d+)", reach)]
+
+
 def _problem(overrides) -> tuple[nominal.NominalProblem, dict]:
     cfg = gj.load_scenario("lunar-skip-entry", overrides=overrides).config
     p = capsule_params(cfg)
@@ -108,9 +134,16 @@ def test_a_target_beyond_every_skip_is_refused_with_the_reachable_interval(bound
         design.design_by_profile(problem, far, cfg["vehicle"])
     text = str(e.value)
     assert "\n" not in text and text.startswith("entry.range_km: 15000 km; allowed:")
-    lo, hi = (float(x) for x in re.search(r"\((\d+) \.\. (\d+) km;", text).groups())
-    # the interval holds the 4000 km target the same vehicle reaches (test above)
-    assert lo < 4000.0 < hi < 15000.0
+    spans = _spans_km(text)
+    # the intervals hold the 4000 km target the same vehicle reaches (test above)
+    assert any(lo < 4000.0 < hi for lo, hi in spans) and spans[-1][1] < 15000.0
+    # the packaged capsule at 12000 km: inside the span of the scan's landings (1838 ..
+    # 12695 km) but bracketed by no first-entry bank; the stated intervals leave it out
+    problem, cfg = _problem(["entry.range_km=12000"])
+    with pytest.raises(gj.ScenarioError) as e:
+        design.design_by_profile(problem, cfg["entry"], cfg["vehicle"])
+    spans = _spans_km(str(e.value))
+    assert spans and not any(lo <= 12000.0 <= hi for lo, hi in spans)
 
 
 def test_a_target_beyond_the_designs_banks_is_designed_at_the_edge_of_the_footprint(capsys):
@@ -136,7 +169,7 @@ def test_a_target_beyond_the_designs_banks_is_designed_at_the_edge_of_the_footpr
         )
     text = str(e2.value)
     assert "\n" not in text and "second-entry banks 15..165 deg: allowed:" in text
-    hi = float(re.search(r"\(\d+ \.\. (\d+) km;", text.rpartition("deg: ")[2]).group(1))
+    hi = _spans_km(text.rpartition("deg: ")[2])[-1][1]
     assert 10000.0 < hi < 12000.0
 
 
