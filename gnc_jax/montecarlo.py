@@ -47,6 +47,12 @@ def build(scenario: Scenario):
     return get_system(scenario.kind).build(scenario)
 
 
+def build_on(backend: Backend, scenario: Scenario):
+    """:func:`build` with ``backend`` placing its arrays and computations."""
+    with placement(backend):
+        return build(scenario)
+
+
 def batch_function(system: AbstractSystem, n_devices: int | None = None, devices=None):
     """``f(sim, law, seed, indices) -> outcomes`` vmapped over run indices, sharded over devices.
 
@@ -151,13 +157,15 @@ def _fitting_batch(system, fn, devices, sim, law, seed_arr, chunk, backend, plan
 class LocalPlan(NamedTuple):
     """How :func:`_run_local` runs: on ``backend`` (``n_devices`` of its devices), a batch
     halved to fit ``max_memory_fraction`` of a device's memory unless ``fixed`` (the user's
-    chunk size), calling ``finished(chunk, outcomes)`` as each chunk is done."""
+    chunk size), calling ``finished(chunk, outcomes)`` as each chunk is done, with the
+    scenario's ``(params, law)`` ``built`` on ``backend`` (:func:`build_on`)."""
 
     backend: Backend
     n_devices: int | None
     max_memory_fraction: float
     fixed: bool
     finished: Callable
+    built: tuple
 
 
 def _where(backend: Backend, devices) -> tuple:
@@ -171,11 +179,11 @@ def _placed_devices(backend: Backend):
     return None if backend.default else backend.devices
 
 
-def _run_local(scenario, system, seed, todo, chunk, plan: LocalPlan):
+def _run_local(system, seed, todo, chunk, plan: LocalPlan):
     """The chunks ``todo`` on this process's devices; returns the compile time and the
     ``time.perf_counter()`` at which the runs started."""
     with placement(plan.backend):
-        sim, law = build(scenario)
+        sim, law = plan.built
         fn, n_dev = batch_function(system, plan.n_devices, _placed_devices(plan.backend))
         devices = plan.backend.devices[:n_dev]
         seed_arr = seed if isinstance(seed, DrawPlan) else jnp.asarray(seed, dtype=jnp.uint32)

@@ -25,6 +25,7 @@ from .montecarlo import (
     LocalPlan,
     _run_distributed,
     _run_local,
+    build_on,
 )
 from .planner import estimate_cost, plan_chunk
 from .results import save_study, summarize
@@ -148,7 +149,9 @@ def run_study(
             halved until it fits, a ``chunk_size`` given here is refused.
         out: a study directory (``gnc_jax.store``): each chunk is written there as soon as it
             finishes, the summary and scenario last; the returned study reads its outcomes
-            from there. A directory holding another study is refused.
+            from there. A directory holding another study is refused. The scenario is built
+            (a capsule's reach check and reference design) before the directory is written, so
+            a scenario refused there leaves no partial study behind.
         resume: continue the study already in ``out`` (same scenario, seed, runs, chunk size
             and code version): finished chunks are kept, missing or damaged ones computed.
         overwrite: replace a study already in ``out`` as a whole.
@@ -198,10 +201,14 @@ def run_study(
     )  # fmt: skip
     n_chunks = -(-runs // chunk)
     bounds = [(c * chunk, min((c + 1) * chunk, runs)) for c in range(n_chunks)]
+    # The system's checks of the scenario against its models (the capsule's reach check and
+    # reference design) refuse it before a study directory is written: a refused study leaves
+    # nothing to resume. Dask workers build it again (a designed reference from its cache).
+    built = build_on(backend, scenario)
     store = _open_store(out, scenario, seed, runs, chunk, resume, overwrite)
     keys = seed if draws is None else draws
     try:
-        plan = LocalPlan(backend, n_devices, max_memory_fraction, fixed, None)
+        plan = LocalPlan(backend, n_devices, max_memory_fraction, fixed, None, built)
         parts, compile_s, wall_s, n_workers, write_s = _run_chunks(
             scenario, system, keys, runs, chunk, bounds, store, progress, announce, distributed,
             plan, client, workers, device,
@@ -348,7 +355,7 @@ def _run_chunks(
             t0 += compile_s  # the workers compile first, all at once
         else:
             plan = plan._replace(finished=finished)
-            compile_s, t0 = _run_local(scenario, system, seed, todo, chunk, plan)
+            compile_s, t0 = _run_local(system, seed, todo, chunk, plan)
             errors, n_workers = [], None
     except KeyboardInterrupt:
         if store is not None:

@@ -1,14 +1,16 @@
 """The subcommands, one function each: ``args`` in, exit code out."""
 
 import sys
+from pathlib import Path
 
 from .exit_codes import EXIT_FAILED_RUNS
 from .output import _print_summary, _print_warnings, _too_many_failed
 
 
-def _writable_dir(path) -> None:
+def _writable_dir(path) -> bool:
     """Create ``path`` (and its parents) and check that files can be written in it, before
-    any work is spent; raise :class:`~gnc_jax.scenario.ScenarioError` naming it otherwise."""
+    any work is spent; raise :class:`~gnc_jax.scenario.ScenarioError` naming it otherwise.
+    Returns whether ``path`` was created here."""
     import pathlib
     import tempfile
 
@@ -16,6 +18,7 @@ def _writable_dir(path) -> None:
 
     try:
         out = pathlib.Path(path)
+        created = not out.exists()
         out.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryFile(dir=out):
             pass
@@ -24,6 +27,7 @@ def _writable_dir(path) -> None:
             f"--out {path}: cannot create or write there ({e.strerror or e}); allowed: a "
             "directory that can be created and written"
         ) from None
+    return created
 
 
 def _device(args) -> None:
@@ -76,8 +80,9 @@ def cmd_run(args) -> int:
     from ..study import run_study
 
     scenario = load_scenario(args.scenario, overrides=args.set or ())
+    created = False
     if args.out:
-        _writable_dir(args.out)
+        created = _writable_dir(args.out)
     elif args.resume or args.overwrite:
         raise ScenarioError("--resume/--overwrite: no --out DIR; allowed: with --out DIR")
     _print_warnings(scenario)
@@ -99,6 +104,10 @@ def cmd_run(args) -> int:
             workers=args.workers,
             device=args.device,
         )
+    except ScenarioError:
+        if created and not any(Path(args.out).iterdir()):  # refused before anything was written
+            Path(args.out).rmdir()
+        raise
     finally:
         if client is not None:
             client.close()

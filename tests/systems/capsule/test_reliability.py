@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import gnc_jax as gj
+from gnc_jax import cli
 from gnc_jax._status import Status
 from gnc_jax.dynamics.entry import entry_state_from_conditions
 from gnc_jax.guidance.entry import cache, design, nominal, reach
@@ -115,10 +116,17 @@ def test_unreachable_range_is_refused_before_the_design_with_the_reachable_inter
     assert hi < 14000.0
 
 
-def test_uncaptured_entry_angle_is_refused_before_the_design_with_the_corridor(paper, no_design):
+def test_uncaptured_entry_angle_is_refused_before_the_design_with_the_corridor(
+    paper, no_design, tmp_path
+):
     scenario = paper.with_overrides(["entry.fpa_deg=-4.5"])
+    out = tmp_path / "study"
     with pytest.raises(gj.ScenarioError) as e:
-        gj.build(scenario)
+        gj.run_study(scenario, runs=2, out=out)
+    assert not out.exists()  # refused before the study directory is written: none to resume
+    argv = ["run", "lunar-skip-entry", "--runs", "2", "--out", str(out)]
+    assert cli.main([*argv, "--set", "entry.fpa_deg=-4.5"]) == cli.EXIT_REFUSED
+    assert not out.exists()  # nor the directory the command created for it
     text = _one_line(e)
     assert text.startswith("entry.fpa_deg: -4.5 deg; the nominal flight skips out")
     shallow, steep = (float(x) for x in text.split("allowed: ")[1].split(" deg")[0].split(" .. "))
