@@ -147,12 +147,12 @@ class CapsuleSystem(AbstractSystem):
     # predictor steps masked) took 0.51 s for 512 runs and 1.34 s for 100,000 (one chunk
     # each): 76 us per sequential step plus 1.25 ns per run-step.
     # CPU: lunar-skip-entry on the 2-core development machine (2 host devices), one chunk
-    # each: 16 runs 0.215 s, 512 runs 1.91 s (benchmarks/cost_calibration.py --fit): 1.03 us
-    # per run-step on a device plus 24 us per sequential step (a small batch still pays for
+    # each: 16 runs 0.218 s, 512 runs 1.56 s (benchmarks/cost_calibration.py --fit): 0.81 us
+    # per run-step on a device plus 26 us per sequential step (a small batch still pays for
     # the corrector rounds of its slowest run).
     step_costs: ClassVar[dict[str, StepCost]] = {
         "gpu": StepCost(1.25e-9, 7.6e-5, "lunar-skip-entry on " + H100_SOURCE),
-        "cpu": StepCost(1.03e-6, 2.4e-5, "lunar-skip-entry on " + CPU_SOURCE),
+        "cpu": StepCost(8.1e-7, 2.6e-5, "lunar-skip-entry on " + CPU_SOURCE),
     }
     run_bytes: ClassVar[int] = 2_500  # the compiled batch's bytes per run on the CPU (2,476)
 
