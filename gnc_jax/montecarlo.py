@@ -158,14 +158,16 @@ class LocalPlan(NamedTuple):
     """How :func:`_run_local` runs: on ``backend`` (``n_devices`` of its devices), a batch
     halved to fit ``max_memory_fraction`` of a device's memory unless ``fixed`` (the user's
     chunk size), calling ``finished(chunk, outcomes)`` as each chunk is done, with the
-    scenario's ``(params, law)`` ``built`` on ``backend`` (:func:`build_on`)."""
+    scenario's ``(params, law)`` ``built`` on ``backend`` (:func:`build_on`) and the
+    ``(executable, batch, compile_s)`` ``compiled`` for it (:func:`_compile_local`)."""
 
     backend: Backend
     n_devices: int | None
     max_memory_fraction: float
     fixed: bool
-    finished: Callable
+    finished: Callable | None
     built: tuple
+    compiled: tuple | None = None
 
 
 def _where(backend: Backend, devices) -> tuple:
@@ -179,17 +181,32 @@ def _placed_devices(backend: Backend):
     return None if backend.default else backend.devices
 
 
-def _run_local(system, seed, todo, chunk, plan: LocalPlan):
-    """The chunks ``todo`` on this process's devices; returns the compile time and the
-    ``time.perf_counter()`` at which the runs started."""
+def _seed_array(seed):
+    return seed if isinstance(seed, DrawPlan) else jnp.asarray(seed, dtype=jnp.uint32)
+
+
+def _compile_local(system, seed, chunk, plan: LocalPlan) -> LocalPlan:
+    """``plan`` with the batch for chunks of ``chunk`` runs compiled on its devices and
+    checked against its memory bound (:func:`_fitting_batch`: a ``fixed`` chunk that does not
+    fit raises its :class:`ScenarioError` here, before any run)."""
     with placement(plan.backend):
         sim, law = plan.built
         fn, n_dev = batch_function(system, plan.n_devices, _placed_devices(plan.backend))
         devices = plan.backend.devices[:n_dev]
-        seed_arr = seed if isinstance(seed, DrawPlan) else jnp.asarray(seed, dtype=jnp.uint32)
-        compiled, batch, compile_s = _fitting_batch(
-            system, fn, devices, sim, law, seed_arr, chunk, plan.backend, plan
+        compiled = _fitting_batch(
+            system, fn, devices, sim, law, _seed_array(seed), chunk, plan.backend, plan
         )
+    return plan._replace(compiled=compiled)
+
+
+def _run_local(system, seed, todo, chunk, plan: LocalPlan):
+    """The chunks ``todo`` on this process's devices, with the executable of
+    :func:`_compile_local`; returns the compile time and the ``time.perf_counter()`` at which
+    the runs started."""
+    with placement(plan.backend):
+        sim, law = plan.built
+        seed_arr = _seed_array(seed)
+        compiled, batch, compile_s = plan.compiled
 
         def launch(c):
             starts = range(c * chunk, (c + 1) * chunk, batch)

@@ -130,6 +130,70 @@ def outcomes_from_table(table: pa.Table, shapes: dict[str, list[int]], names=Non
     return out
 
 
+def _existing(path: pathlib.Path) -> dict | None:
+    manifest = path / MANIFEST
+    if not manifest.exists():
+        return None
+    try:
+        return json.loads(manifest.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return {"scenario_name": "?", "state": "damaged"}
+
+
+def _occupied(path: pathlib.Path) -> bool:
+    return path.is_dir() and any(p.name != LOCK for p in path.iterdir())
+
+
+def check_directory(path, manifest: dict, resume: bool = False, overwrite: bool = False) -> None:
+    """:class:`ScenarioError` unless the directory ``path`` can take the study ``manifest``
+    (new or empty, the same study with ``resume``, a gnc_jax study with ``overwrite``); reads
+    the directory only, so a study checks it before compiling and writes it after."""
+    path = pathlib.Path(path)
+    old = _existing(path)
+    looks_like_study = old is not None or any((path / n).exists() for n in _STUDY_FILES)
+    if overwrite and _occupied(path):
+        if not looks_like_study:
+            raise ScenarioError(
+                f"out: {path}: not empty and not a gnc_jax study directory; allowed: an "
+                "empty or new directory, or one written by gnc_jax (--overwrite replaces "
+                "only those)"
+            )
+    elif old is not None:
+        differs = [
+            k
+            for k in ("scenario_sha256", "seed", "runs", "chunk_size", "code_version")
+            if old.get(k) != manifest.get(k)
+        ]
+        what = f"a {old.get('state', '?')} study of {old.get('scenario_name', '?')}"
+        if not resume:
+            raise ScenarioError(
+                f"out: {path}: holds {what}; allowed: --resume (continue the same "
+                "study) or --overwrite (replace it), or another directory"
+            )
+        if differs:
+            names = {"scenario_sha256": "scenario", "chunk_size": "chunk size"}
+            raise ScenarioError(
+                f"out: {path}: cannot resume {what}: "
+                + ", ".join(
+                    f"{names.get(k, k.replace('_', ' '))} differs"
+                    + (
+                        f" ({old.get(k)} there, {manifest.get(k)} now)"
+                        if k != "scenario_sha256"
+                        else ""
+                    )
+                    for k in differs
+                )
+                + "; allowed: the same study, or --overwrite"
+            )
+    elif _occupied(path):
+        raise ScenarioError(
+            f"out: {path}: not empty and holds no gnc_jax study"
+            + (" of this version (no study.json)" if looks_like_study else "")
+            + "; allowed: an empty or new directory"
+            + (", or --overwrite" if looks_like_study else "")
+        )
+
+
 class StudyStore:
     """The on-disk side of one study: manifest, lock, chunk files (see the module docstring).
 
@@ -184,18 +248,6 @@ class StudyStore:
     def __exit__(self, *exc):
         self.close()
 
-    def _existing(self) -> dict | None:
-        path = self.path / MANIFEST
-        if not path.exists():
-            return None
-        try:
-            return json.loads(path.read_text())
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError):
-            return {"scenario_name": "?", "state": "damaged"}
-
-    def _occupied(self) -> bool:
-        return any(p.name != LOCK for p in self.path.iterdir())
-
     def _clear(self) -> None:
         for name in _STUDY_FILES:
             with contextlib.suppress(FileNotFoundError):
@@ -207,51 +259,9 @@ class StudyStore:
             tmp.unlink()
 
     def _open(self, manifest: dict, resume: bool, overwrite: bool) -> dict:
-        old = self._existing()
-        looks_like_study = old is not None or any((self.path / n).exists() for n in _STUDY_FILES)
-        if overwrite and self._occupied():
-            if not looks_like_study:
-                raise ScenarioError(
-                    f"out: {self.path}: not empty and not a gnc_jax study directory; allowed: an "
-                    "empty or new directory, or one written by gnc_jax (--overwrite replaces "
-                    "only those)"
-                )
+        check_directory(self.path, manifest, resume, overwrite)
+        if overwrite and _occupied(self.path):
             self._clear()
-            old = None
-        elif old is not None:
-            differs = [
-                k
-                for k in ("scenario_sha256", "seed", "runs", "chunk_size", "code_version")
-                if old.get(k) != manifest.get(k)
-            ]
-            what = f"a {old.get('state', '?')} study of {old.get('scenario_name', '?')}"
-            if not resume:
-                raise ScenarioError(
-                    f"out: {self.path}: holds {what}; allowed: --resume (continue the same "
-                    "study) or --overwrite (replace it), or another directory"
-                )
-            if differs:
-                names = {"scenario_sha256": "scenario", "chunk_size": "chunk size"}
-                raise ScenarioError(
-                    f"out: {self.path}: cannot resume {what}: "
-                    + ", ".join(
-                        f"{names.get(k, k.replace('_', ' '))} differs"
-                        + (
-                            f" ({old.get(k)} there, {manifest.get(k)} now)"
-                            if k != "scenario_sha256"
-                            else ""
-                        )
-                        for k in differs
-                    )
-                    + "; allowed: the same study, or --overwrite"
-                )
-        elif self._occupied():
-            raise ScenarioError(
-                f"out: {self.path}: not empty and holds no gnc_jax study"
-                + (" of this version (no study.json)" if looks_like_study else "")
-                + "; allowed: an empty or new directory"
-                + (", or --overwrite" if looks_like_study else "")
-            )
         m = dict(manifest, state="partial", format=_FORMAT)
         self.runs_dir.mkdir(exist_ok=True)
         for tmp in self.runs_dir.glob(".*.tmp"):  # a chunk a killed process did not finish

@@ -23,6 +23,7 @@ from .montecarlo import (
     MAX_HOURS,
     MAX_MEMORY_FRACTION,
     LocalPlan,
+    _compile_local,
     _run_distributed,
     _run_local,
     build_on,
@@ -30,7 +31,7 @@ from .montecarlo import (
 from .planner import estimate_cost, plan_chunk
 from .results import save_study, summarize
 from .scenario import Scenario, ScenarioError
-from .store import chunk_files
+from .store import StudyStore, check_directory, chunk_files, code_version
 from .systems.base import get_system
 
 
@@ -145,13 +146,15 @@ def run_study(
             design or compilation) a study whose :func:`estimate_cost` exceeds this many hours.
         max_memory_fraction: bound on a compiled batch's memory, as a fraction of one
             device's (a GPU's allocator limit; on the CPU the machine's physical memory),
-            checked after compilation, before any run: a chunk size the planner chose is
-            halved until it fits, a ``chunk_size`` given here is refused.
+            checked after compilation, before any run and before ``out`` is written: a chunk
+            size the planner chose is halved until it fits, a ``chunk_size`` given here is
+            refused.
         out: a study directory (``gnc_jax.store``): each chunk is written there as soon as it
             finishes, the summary and scenario last; the returned study reads its outcomes
-            from there. A directory holding another study is refused. The scenario is built
-            (a capsule's reach check and reference design) before the directory is written, so
-            a scenario refused there leaves no partial study behind.
+            from there. A directory holding another study is refused before anything is built.
+            The scenario is built (a capsule's reach check and reference design) and its batch
+            compiled (the memory bound) before the directory is written, so a study refused
+            there leaves no partial study behind.
         resume: continue the study already in ``out`` (same scenario, seed, runs, chunk size
             and code version): finished chunks are kept, missing or damaged ones computed.
         overwrite: replace a study already in ``out`` as a whole.
@@ -201,14 +204,20 @@ def run_study(
     )  # fmt: skip
     n_chunks = -(-runs // chunk)
     bounds = [(c * chunk, min((c + 1) * chunk, runs)) for c in range(n_chunks)]
+    manifest = None if out is None else _manifest(scenario, seed, runs, chunk)
+    if out is not None:
+        check_directory(out, manifest, resume, overwrite)
     # The system's checks of the scenario against its models (the capsule's reach check and
-    # reference design) refuse it before a study directory is written: a refused study leaves
-    # nothing to resume. Dask workers build it again (a designed reference from its cache).
+    # reference design) and the memory bound on the compiled batch refuse a study before its
+    # directory is written: a refused study leaves nothing to resume. Dask workers build it
+    # again (a designed reference from its cache) and compile their own chunks.
     built = build_on(backend, scenario)
-    store = _open_store(out, scenario, seed, runs, chunk, resume, overwrite)
     keys = seed if draws is None else draws
+    plan = LocalPlan(backend, n_devices, max_memory_fraction, fixed, None, built)
+    if not distributed:
+        plan = _compile_local(system, keys, chunk, plan)
+    store = None if out is None else StudyStore(out, manifest, resume, overwrite)
     try:
-        plan = LocalPlan(backend, n_devices, max_memory_fraction, fixed, None, built)
         parts, compile_s, wall_s, n_workers, write_s = _run_chunks(
             scenario, system, keys, runs, chunk, bounds, store, progress, announce, distributed,
             plan, client, workers, device,
@@ -292,13 +301,9 @@ def _finish(
     return study
 
 
-def _open_store(out, scenario, seed, runs, chunk, resume, overwrite):
-    """The study directory ``out`` opened for this study (``None`` without one)."""
-    if out is None:
-        return None
-    from .store import StudyStore, code_version
-
-    manifest = dict(
+def _manifest(scenario, seed, runs, chunk) -> dict:
+    """What a study directory records of the study (:class:`~gnc_jax.store.StudyStore`)."""
+    return dict(
         scenario_name=scenario.name,
         kind=scenario.kind,
         scenario_sha256=hashlib.sha256(scenario.to_toml().encode()).hexdigest(),
@@ -307,7 +312,6 @@ def _open_store(out, scenario, seed, runs, chunk, resume, overwrite):
         chunk_size=chunk,
         code_version=code_version(),
     )
-    return StudyStore(out, manifest, resume=resume, overwrite=overwrite)
 
 
 def _run_chunks(

@@ -215,16 +215,18 @@ def test_the_cost_estimate_is_computed_from_the_scenario_alone():
     assert two.latency_s == one.latency_s > 0
 
 
-def test_a_chunk_too_large_for_memory_is_refused_before_it_runs(monkeypatch):
+def test_a_chunk_too_large_for_memory_is_refused_before_it_runs(monkeypatch, tmp_path):
     scenario = gj.load_scenario(TOY)
     ran = []
     real = montecarlo._joined  # every finished chunk's outcomes pass through it
     monkeypatch.setattr(montecarlo, "_joined", lambda outs: (ran.append(1), real(outs))[1])
+    out = tmp_path / "study"
     with pytest.raises(
         ScenarioError, match=r"chunk_size: 1000 runs need .* allowed: chunk_size <="
     ):
-        gj.run_study(scenario, runs=1000, chunk_size=1000, max_memory_fraction=1e-9)
+        gj.run_study(scenario, runs=1000, chunk_size=1000, max_memory_fraction=1e-9, out=out)
     assert ran == []  # refused after compilation, before any chunk ran
+    assert not out.exists()  # and before the study directory was written: none to resume
 
 
 @pytest.mark.slow
