@@ -9,7 +9,7 @@ law's Schmitt trigger on |A|; ``deep-impact-los``: the LOS law's switching curve
 system's ``test_overrides`` (bennu-apn: a 2,000 s approach, 1,940 guidance steps;
 ``--full-runs``: also the packaged scenario, 91,200 steps for bennu-apn), for the law's
 tunable gains in the tuner's coordinates theta (bennu-apn: log N0, log k,
-log(trigger_on - trigger_off), log trigger_off; deep-impact-los: log(k1 - k2), log k2):
+log(trigger_on - trigger_off), log(trigger_off - 0.01); deep-impact-los: log(k1 - k2), log k2):
 
 * a 1-D scan of the hard objective along each gain (21 points over theta +- 0.01): how many
   distinct values, how many exactly zero increments (piecewise constant) and the largest jump;

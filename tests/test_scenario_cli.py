@@ -95,6 +95,11 @@ BAD_INPUT += [
     (["run", APN, "--set", "guidance.apn.n_min=0"], "guidance.apn.n_min: 0 is out of range"),
     (["run", APN, "--set", "guidance.apn.n_min=1.9"], "allowed: a number in [2, 100]"),
     (
+        ["run", APN, "--set", "guidance.apn.trigger_on=1e-300"],
+        "guidance.apn.trigger_on: 1e-300 is out of range; allowed: a number in [0.01, 1e+06]",
+    ),
+    (["run", APN, "--set", "guidance.apn.trigger_off=0.005"], "guidance.apn.trigger_off: 0.005"),
+    (
         ["run", APN, "--set", "spacecraft.mass_kg=0.003"],
         "spacecraft.propellant_kg: 25 kg is not less than spacecraft.mass_kg = 0.003 kg",
     ),
