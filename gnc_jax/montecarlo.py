@@ -233,24 +233,26 @@ def _joined(outs) -> dict:
     return {k: np.concatenate([np.asarray(p[k]) for p in parts]) for k in parts[0]}
 
 
-_BUILT: dict = {}
-
-
 def run_chunk(
-    scenario: Scenario, seed: int, start: int, stop: int, chunk: int, device: str = "auto"
+    scenario: Scenario,
+    seed: int,
+    start: int,
+    stop: int,
+    chunk: int,
+    device: str = "auto",
+    *,
+    built: tuple,
 ):
     """Runs ``start .. stop-1`` of a study on this process's ``device`` (a Dask worker's task):
-    ``(outcomes as numpy arrays, compile time)``. The scenario is built and the chunk compiled
-    once per process and chunk size (and read from JAX's persistent compilation cache when
-    the worker was started with one)."""
+    ``(outcomes as numpy arrays, compile time)``. ``built``: the scenario's ``(params, law)``
+    as the process that submitted the study built them (:func:`build_on`), so no worker
+    builds it again (a midcourse nominal's targeting, a capsule's reference design). The chunk
+    is compiled once per process and chunk size (and read from JAX's persistent compilation
+    cache when the worker was started with one)."""
     system = get_system(scenario.kind)
     backend = select(device)
     with placement(backend):
-        text = scenario.to_toml()
-        if text not in _BUILT:
-            _BUILT.clear()
-            _BUILT[text] = build(scenario)
-        sim, law = _BUILT[text]
+        sim, law = built
         fn, n_dev = batch_function(system, devices=_placed_devices(backend))
         padded = padded_chunk(chunk, n_dev, system.vector_lanes)
         seed_arr = jnp.asarray(seed, dtype=jnp.uint32)
@@ -298,10 +300,11 @@ def local_cluster(workers: int, option: str = "workers"):
     return distributed.Client(cluster)
 
 
-def _run_distributed(scenario, seed, todo, bounds, chunk, client, workers, finished, device):
-    """The chunks ``todo`` as tasks of a Dask client; returns ``(compile time, errors,
-    workers, time.perf_counter() once the cluster was up)``. A lost worker's tasks are rerun
-    elsewhere by Dask; a chunk that raises is reported and the others go on."""
+def _run_distributed(scenario, built, seed, todo, bounds, chunk, client, workers, finished, device):
+    """The chunks ``todo`` as tasks of a Dask client, each shipped the scenario's ``built``
+    ``(params, law)`` (:func:`run_chunk`); returns ``(compile time, errors, workers,
+    time.perf_counter() once the cluster was up)``. A lost worker's tasks are rerun elsewhere
+    by Dask; a chunk that raises is reported and the others go on."""
     as_completed = require("dask.distributed", "workers").as_completed
 
     own = client is None
@@ -312,7 +315,14 @@ def _run_distributed(scenario, seed, todo, bounds, chunk, client, workers, finis
         t0 = time.perf_counter()
         futures = {
             client.submit(
-                run_chunk, scenario, seed, *bounds[c], chunk, device=device, pure=False
+                run_chunk,
+                scenario,
+                seed,
+                *bounds[c],
+                chunk,
+                device=device,
+                built=built,
+                pure=False,
             ): c
             for c in todo
         }

@@ -158,8 +158,9 @@ def run_study(
         resume: continue the study already in ``out`` (same scenario, seed, runs, chunk size
             and code version): finished chunks are kept, missing or damaged ones computed.
         overwrite: replace a study already in ``out`` as a whole.
-        client: a ``dask.distributed.Client``: the chunks run as tasks on its workers (each
-            worker compiles once per process; results come back to this process).
+        client: a ``dask.distributed.Client``: the chunks run as tasks on its workers (sent
+            the scenario as built here; each worker compiles once per process; results come
+            back to this process).
         workers: start a local Dask cluster of this many worker processes for the study
             (the cores are split between them).
         device: ``"cpu"``, ``"gpu"`` or ``"auto"`` (default: JAX's default backend, a GPU
@@ -209,8 +210,8 @@ def run_study(
         check_directory(out, manifest, resume, overwrite)
     # The system's checks of the scenario against its models (the capsule's reach check and
     # reference design) and the memory bound on the compiled batch refuse a study before its
-    # directory is written: a refused study leaves nothing to resume. Dask workers build it
-    # again (a designed reference from its cache) and compile their own chunks.
+    # directory is written: a refused study leaves nothing to resume. Dask workers are sent
+    # what was built here and compile their own chunks.
     built = build_on(backend, scenario)
     keys = seed if draws is None else draws
     plan = LocalPlan(backend, n_devices, max_memory_fraction, fixed, None, built)
@@ -354,8 +355,9 @@ def _run_chunks(
     try:
         if distributed:
             compile_s, errors, n_workers, t0 = _run_distributed(
-                scenario, seed, todo, bounds, chunk, client, workers, finished, device
-            )
+                scenario, plan.built, seed, todo, bounds, chunk, client, workers, finished,
+                device,
+            )  # fmt: skip
             t0 += compile_s  # the workers compile first, all at once
         else:
             plan = plan._replace(finished=finished)

@@ -261,11 +261,18 @@ def test_a_chunk_that_raises_is_reported_and_the_rest_go_on(toy, reference, tmp_
         return run_chunk(scenario, seed, start, stop, chunk, **options)
 
     monkeypatch.setattr(montecarlo, "run_chunk", faulty)
+    builds = []
+    system = type(gj.get_system(toy.kind))  # not copied into a task: counts every build
+    build = system.build
+    monkeypatch.setattr(
+        system, "build", lambda self, sc: (builds.append(sc.name), build(self, sc))[1]
+    )
     out = tmp_path / "study"
     with distributed.Client(processes=False, n_workers=1, threads_per_worker=1) as client:
         with pytest.raises(study_module.StudyError, match=r"chunk 2 \(runs 80\.\.119\)") as e:
             run_study(toy, runs=RUNS, chunk_size=CHUNK, progress=False, client=client, out=out)
     assert e.value.errors == [dict(chunk=2, runs=[80, 120], error="FloatingPointError: injected")]
+    assert builds == [toy.name]  # built once, by the study; its workers are sent the result
     names = [f.name for f in store.chunk_files(out)]
     assert len(names) == RUNS // CHUNK - 1 and "chunk-000002.parquet" not in names
     monkeypatch.setattr(montecarlo, "run_chunk", run_chunk)
