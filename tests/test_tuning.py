@@ -353,6 +353,32 @@ def test_built_in_terms_match_numpy_and_their_relaxations_tend_to_them():
     assert smooth[0] > smooth[1] > smooth[2] and smooth[2] < 1e-2
 
 
+def test_a_batch_without_an_ok_run_is_nan_and_never_the_selected_point(monkeypatch):
+    """No run counts (every weight 0): each built-in term, and so the objective, is NaN, not
+    the best possible 0; the training check then keeps the lowest finite checked point."""
+    from typing import NamedTuple
+
+    from gnc_jax.tuning import tuner
+
+    class Out(NamedTuple):
+        status: np.ndarray
+        miss_m: np.ndarray
+        dv_mps: np.ndarray
+
+    out = Out(np.full(4, 6), np.full(4, 50.0), np.full(4, 8.0))  # 6: propellant
+    objective = parse_objective("miss_rms+10*dv_mean+hit_probability(70)", toy())
+    for t in (None, 0.05):
+        assert np.isnan(float(objective.value(out, np.zeros(4), t)))
+    assert all(np.isnan(v) for v in objective.term_values(out, np.zeros(4)).values())
+    monkeypatch.setattr(tuner, "_hard_objective", lambda *a: float("nan"))  # the start: no ok run
+    history = [
+        dict(step=0, check=float("nan"), check_gains=[9.0]),
+        dict(step=1, check=5.0, check_gains=[2.0]),
+    ]
+    check, gains = tuner._training_check(None, [4.0], np.arange(4), history)
+    assert gains == [2.0] and check["selected_step"] == 1
+
+
 def test_auto_gradient_mode_follows_the_number_of_parameters(monkeypatch):
     """``gradient="auto"`` runs forward mode below ``REVERSE_FROM`` parameters and reverse
     mode from it on, or the cheaper by a system's measured costs; both give the steps the

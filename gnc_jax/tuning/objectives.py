@@ -13,7 +13,11 @@ from ..systems.base import AbstractSystem
 
 
 def _wmean(x, w):
-    return jnp.sum(jnp.where(w > 0, x, 0.0) * w) / jnp.maximum(jnp.sum(w), 1.0)
+    """The mean of ``x`` over the runs that count (weight > 0); NaN when none does, so that
+    gains that fail every run rank last, never at the best possible value 0."""
+    total = jnp.sum(w)
+    mean = jnp.sum(jnp.where(w > 0, x, 0.0) * w) / jnp.maximum(total, 1.0)
+    return jnp.where(total > 0, mean, jnp.nan)
 
 
 def _miss_rms(out, w, arg, t):
@@ -111,7 +115,8 @@ class Objective:
 
     ``value(outcomes, weights, temperature)`` is the smooth objective at ``temperature`` and the
     hard one for ``temperature=None``; ``weights`` is 1 for the runs that count (status ``ok``)
-    and 0 for the others. A user callable ``fn(outcomes, weights)`` is used for both.
+    and 0 for the others (a built-in term is NaN when no run counts). A user callable
+    ``fn(outcomes, weights)`` is used for both.
     """
 
     spec: str

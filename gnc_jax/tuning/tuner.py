@@ -199,7 +199,7 @@ def _training_check(problem, initial, check_indices, history) -> tuple[dict, lis
     late does not decide it."""
     checked = [(_hard_objective(problem, initial, check_indices), -1, initial)]
     checked += [(h["check"], h["step"], h["check_gains"]) for h in history if "check" in h]
-    best = min(checked, key=lambda c: c[0])
+    best = min(checked, key=lambda c: c[0] if np.isfinite(c[0]) else inf)  # no ok run: last
     check = dict(
         runs=len(check_indices),
         initial=checked[0][0],
