@@ -326,6 +326,30 @@ def test_an_unwritable_out_dir_is_refused_before_compilation(capsys, monkeypatch
     assert "--out /dev/null/r" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["run", "deep-impact-los", "--max-hours", "1e-9"],
+        ["tune", "deep-impact-los", "--params", "guidance.los.nosuch"],
+        ["envelope", "deep-impact-los", "--grid", "guidance.los.k1=-1,2", "--runs", "4"],
+        ["budget", "deep-impact-los", "--metrics", "nosuch"],
+        ["reproduce", "--only", "deep-impact-los", "--max-hours", "1e-9"],
+    ],
+)
+def test_a_refused_command_leaves_no_out_dir_it_created(argv, tmp_path, capsys, monkeypatch):
+    def no_compile(*a, **k):
+        raise AssertionError("compiled despite bad input")
+
+    monkeypatch.setattr(montecarlo, "_compile", no_compile)
+    out = tmp_path / "new" / "out"
+    assert cli.main([*argv, "--out", str(out)]) == 2
+    assert "allowed" in capsys.readouterr().err
+    assert not out.exists()
+    (tmp_path / "kept").mkdir()  # a directory that was there stays
+    assert cli.main([*argv, "--out", str(tmp_path / "kept")]) == 2
+    assert (tmp_path / "kept").is_dir()
+
+
 def test_reproduce_of_an_unknown_scenario_is_refused(capsys, tmp_path):
     assert cli.main(["reproduce", "--out", str(tmp_path), "--only", "nosuch"]) == 2
     err = capsys.readouterr().err.strip()

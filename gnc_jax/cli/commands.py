@@ -1,5 +1,6 @@
 """The subcommands, one function each: ``args`` in, exit code out."""
 
+import contextlib
 import sys
 from pathlib import Path
 
@@ -28,6 +29,20 @@ def _writable_dir(path) -> bool:
             "directory that can be created and written"
         ) from None
     return created
+
+
+@contextlib.contextmanager
+def _out_dir(path):
+    """``--out`` created and checked before any work (:func:`_writable_dir`; nothing for
+    ``None``); removed again when the command stops (refused, interrupted) before writing
+    anything into a directory it created."""
+    created = path is not None and _writable_dir(path)
+    try:
+        yield
+    except BaseException:
+        if created and not any(Path(path).iterdir()):
+            Path(path).rmdir()
+        raise
 
 
 def _device(args) -> None:
@@ -80,37 +95,29 @@ def cmd_run(args) -> int:
     from ..study import run_study
 
     scenario = load_scenario(args.scenario, overrides=args.set or ())
-    created = False
-    if args.out:
-        created = _writable_dir(args.out)
-    elif args.resume or args.overwrite:
+    if not args.out and (args.resume or args.overwrite):
         raise ScenarioError("--resume/--overwrite: no --out DIR; allowed: with --out DIR")
-    _print_warnings(scenario)
-    client = None
-    if args.scheduler:
-        client = _connect(args.scheduler)
-    try:
-        study = run_study(
-            scenario,
-            runs=args.runs,
-            seed=args.seed,
-            chunk_size=args.chunk_size,
-            progress=False if args.no_progress else None,
-            max_hours=args.max_hours,
-            out=args.out,
-            resume=args.resume,
-            overwrite=args.overwrite,
-            client=client,
-            workers=args.workers,
-            device=args.device,
-        )
-    except ScenarioError:
-        if created and not any(Path(args.out).iterdir()):  # refused before anything was written
-            Path(args.out).rmdir()
-        raise
-    finally:
-        if client is not None:
-            client.close()
+    with _out_dir(args.out or None):
+        _print_warnings(scenario)
+        client = _connect(args.scheduler) if args.scheduler else None
+        try:
+            study = run_study(
+                scenario,
+                runs=args.runs,
+                seed=args.seed,
+                chunk_size=args.chunk_size,
+                progress=False if args.no_progress else None,
+                max_hours=args.max_hours,
+                out=args.out,
+                resume=args.resume,
+                overwrite=args.overwrite,
+                client=client,
+                workers=args.workers,
+                device=args.device,
+            )
+        finally:
+            if client is not None:
+                client.close()
     summary = study.summary()
     print(
         f"{scenario.name}: {study.runs} runs, compile {study.compile_s:.1f} s, "
@@ -140,15 +147,14 @@ def cmd_reproduce(args) -> int:
         raise ScenarioError(
             f"--only {unknown[0]}: unknown scenario; allowed: {', '.join(packaged_names())}"
         )
-    _writable_dir(args.out)
-
-    summaries = reproduce(
-        args.out,
-        runs=args.runs,
-        only=args.only,
-        progress=False if args.no_progress else None,
-        max_hours=args.max_hours,
-    )
+    with _out_dir(args.out):
+        summaries = reproduce(
+            args.out,
+            runs=args.runs,
+            only=args.only,
+            progress=False if args.no_progress else None,
+            max_hours=args.max_hours,
+        )
     print(f"wrote {args.out}/reproduce.md")
     bad = [s for s in summaries if _too_many_failed(s, args.max_failed)]
     if bad:
@@ -166,36 +172,36 @@ def cmd_envelope(args) -> int:
     from ..scenario import load_scenario
 
     scenario = load_scenario(args.scenario, overrides=args.set or ())
-    _writable_dir(args.out)
-    _print_warnings(scenario)
-    options = {} if args.load_limit_g is None else {"load_limit_g": args.load_limit_g}
-    client = None
-    if args.scheduler:
-        client = _connect(args.scheduler)
-    elif args.workers:
-        from ..montecarlo import local_cluster
+    with _out_dir(args.out):
+        _print_warnings(scenario)
+        options = {} if args.load_limit_g is None else {"load_limit_g": args.load_limit_g}
+        client = None
+        if args.scheduler:
+            client = _connect(args.scheduler)
+        elif args.workers:
+            from ..montecarlo import local_cluster
 
-        client = local_cluster(args.workers, "--workers")
-    try:
-        env = envelope(
-            scenario,
-            args.grid,
-            runs=args.runs,
-            seed=args.seed,
-            out=args.out,
-            progress=True,
-            client=client,
-            device=args.device,
-            batch_cells=args.batch_cells,
-            max_hours=args.max_hours,
-            **options,
-        )
-    finally:
-        if client is not None:
-            cluster = client.cluster if args.workers else None
-            client.close()
-            if cluster is not None:
-                cluster.close()
+            client = local_cluster(args.workers, "--workers")
+        try:
+            env = envelope(
+                scenario,
+                args.grid,
+                runs=args.runs,
+                seed=args.seed,
+                out=args.out,
+                progress=True,
+                client=client,
+                device=args.device,
+                batch_cells=args.batch_cells,
+                max_hours=args.max_hours,
+                **options,
+            )
+        finally:
+            if client is not None:
+                cluster = client.cluster if args.workers else None
+                client.close()
+                if cluster is not None:
+                    cluster.close()
     print(f"wrote {args.out}/cells.parquet and {len(env.metrics)} heat maps")
     return 0
 
@@ -205,31 +211,30 @@ def cmd_budget(args) -> int:
     from ..scenario import load_scenario
 
     scenario = load_scenario(args.scenario, overrides=args.set or ())
-    if args.out:
-        _writable_dir(args.out)
-    _print_warnings(scenario)
-    result = budget(
-        scenario,
-        runs=args.runs,
-        seed=args.seed,
-        metrics=args.metrics,
-        groups=True if args.groups else None,
-        methods=tuple(args.methods or METHODS),
-        max_hours=args.max_hours,
-        progress=False if args.no_progress else None,
-    )
-    print(
-        f"{scenario.name}: budget of {len(result.factors)} sources, {result.runs} runs per "
-        f"design, compile {result.compile_s:.1f} s, wall {result.wall_s:.1f} s"
-    )
-    if result.inactive:
-        print(f"  zero (left out): {', '.join(result.inactive)}")
-    if result.linear_error:
-        print(f"  linear method not available: {result.linear_error}")
-    print(result)
-    if args.out:
-        paths = result.save(args.out)
-        print("wrote " + ", ".join(str(p) for p in paths))
+    with _out_dir(args.out):
+        _print_warnings(scenario)
+        result = budget(
+            scenario,
+            runs=args.runs,
+            seed=args.seed,
+            metrics=args.metrics,
+            groups=True if args.groups else None,
+            methods=tuple(args.methods or METHODS),
+            max_hours=args.max_hours,
+            progress=False if args.no_progress else None,
+        )
+        print(
+            f"{scenario.name}: budget of {len(result.factors)} sources, {result.runs} runs per "
+            f"design, compile {result.compile_s:.1f} s, wall {result.wall_s:.1f} s"
+        )
+        if result.inactive:
+            print(f"  zero (left out): {', '.join(result.inactive)}")
+        if result.linear_error:
+            print(f"  linear method not available: {result.linear_error}")
+        print(result)
+        if args.out:
+            paths = result.save(args.out)
+            print("wrote " + ", ".join(str(p) for p in paths))
     failed = 1.0 - result.counts["all_on_ok"] / result.runs
     if failed > args.max_failed:
         print(
@@ -255,26 +260,26 @@ def cmd_tune(args) -> int:
     from ..tuning import progress_line, tune
 
     scenario = load_scenario(args.scenario, overrides=args.set or ())
-    _writable_dir(args.out)
-    names = [n.strip() for n in args.params.split(",") if n.strip()]
-    result = tune(
-        scenario,
-        names,
-        args.objective,
-        batch=args.batch,
-        steps=args.steps,
-        seed=args.seed,
-        method=args.method,
-        gradient=args.mode,
-        learning_rate=args.learning_rate,
-        sigma=args.sigma,
-        population=args.population,
-        heldout_runs=args.heldout,
-        eval_every=args.eval_every,
-        eval_runs=args.eval_runs,
-        callback=lambda rec: print(progress_line(rec, names), flush=True),
-        device=args.device,
-    )
+    with _out_dir(args.out):
+        names = [n.strip() for n in args.params.split(",") if n.strip()]
+        result = tune(
+            scenario,
+            names,
+            args.objective,
+            batch=args.batch,
+            steps=args.steps,
+            seed=args.seed,
+            method=args.method,
+            gradient=args.mode,
+            learning_rate=args.learning_rate,
+            sigma=args.sigma,
+            population=args.population,
+            heldout_runs=args.heldout,
+            eval_every=args.eval_every,
+            eval_runs=args.eval_runs,
+            callback=lambda rec: print(progress_line(rec, names), flush=True),
+            device=args.device,
+        )
     print(
         f"{scenario.name}: {args.method}"
         + (f" ({result.gradient} mode)" if result.gradient else "")
