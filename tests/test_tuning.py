@@ -247,6 +247,11 @@ BAD_TUNE = [
     (["--params", "guidance.pn.n", "--objective", "chute_rms"], "objective: chute_rms needs"),
     (["--params", "guidance.pn.n", "--objective", "peak_load"], "peak_load needs an argument"),
     (["--params", "guidance.pn.n", "--set", "guidance.pn.n=0.5"], "at its lower bound"),
+    (["--params", "guidance.pn.n", "--objective", "0*miss_rms"], "weighs every term 0"),
+    (["--params", "guidance.pn.n", "--objective", "miss_rms+-1*dv_mean"], "weight -1"),
+    (["--params", "guidance.pn.n", "--objective", "1e999*miss_rms"], "weight inf"),
+    (["--params", "guidance.pn.n", "--objective", "hit_probability(0)"], "argument 0"),
+    (["--params", "guidance.pn.n", "--objective", "miss_rms+hit_probability(-5)"], "argument -5"),
 ]
 
 

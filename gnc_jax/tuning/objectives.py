@@ -2,6 +2,7 @@
 callables, hard and smooth (:class:`Objective`, :func:`parse_objective`)."""
 
 import dataclasses
+import math
 import re
 from collections.abc import Callable, Sequence
 
@@ -195,6 +196,11 @@ def parse_objective(objective, scenario: Scenario) -> Objective:
                 f"objective: {part.strip()!r}: not a number; allowed: {_allowed_objectives()}"
             ) from None
         term = TERMS[name]
+        if not 0 <= weight < math.inf:
+            raise ScenarioError(
+                f"objective: {part.strip()!r}: weight {weight:g}; allowed: a finite weight >= 0 "
+                "(the tuner minimises the sum)"
+            )
         if name == "hit_probability" and arg is None:
             arg = _target_radius_m(scenario)
             if arg is None:
@@ -206,7 +212,16 @@ def parse_objective(objective, scenario: Scenario) -> Objective:
             raise ScenarioError(f"objective: {name} needs an argument; allowed: {name}({term.arg})")
         if not term.arg and arg is not None:
             raise ScenarioError(f"objective: {name} takes no argument; allowed: {name}")
+        if arg is not None and not 0 < arg < math.inf:
+            raise ScenarioError(
+                f"objective: {part.strip()!r}: argument {arg:g}; allowed: {name}(X), X finite "
+                f"and > 0: the {term.arg}"
+            )
         terms.append((weight, name, arg))
+    if not any(w > 0 for w, _, _ in terms):
+        raise ScenarioError(
+            f"objective: {objective!r} weighs every term 0; allowed: at least one weight > 0"
+        )
     return Objective(objective.replace(" ", ""), tuple(terms))
 
 
