@@ -277,6 +277,8 @@ def test_bad_tune_input_is_one_line_before_compilation(
         (dict(sigma=float("nan")), "sigma: nan"),
         (dict(learning_rate=-0.1), "learning_rate: -0.1; allowed: a finite number > 0"),
         (dict(sigma="0.1"), "sigma: '0.1'"),
+        (dict(temperature=-1.0), "temperature: -1.0; allowed: a finite number > 0"),
+        (dict(temperature=(0.1, 0.0)), "temperature: (0.1, 0.0)"),
     ],
 )
 def test_a_bad_step_is_refused_before_compilation(kw, message, monkeypatch):

@@ -107,6 +107,7 @@ def tune(
         batch, steps, seed, method, gradient, train_runs, heldout_runs, eval_every, eval_runs,
         population, check_runs, check_every, learning_rate, sigma,
     )  # fmt: skip
+    _check_temperature(temperature)
     scenario = with_schedule_starts(scenario, params)
     gains = resolve_gains(scenario, params)
     objective_ = parse_objective(objective, scenario)
@@ -191,6 +192,20 @@ def _checked_sizes(
             "there)"
         )
     return train_runs
+
+
+def _check_temperature(temperature) -> None:
+    """``temperature``: ``None``, one number or a ``(start, end)`` pair, each finite and > 0;
+    :class:`ScenarioError` otherwise."""
+    if temperature is None:
+        return
+    values = temperature if isinstance(temperature, tuple) else (temperature,)
+    positive = (isinstance(v, Real) and not isinstance(v, bool) and 0 < v < inf for v in values)
+    if len(values) != (2 if isinstance(temperature, tuple) else 1) or not all(positive):
+        raise ScenarioError(
+            f"temperature: {temperature!r}; allowed: a finite number > 0 or a pair (start, end) "
+            "of them"
+        )
 
 
 def _training_check(problem, initial, check_indices, history) -> tuple[dict, list]:
