@@ -320,6 +320,13 @@ def test_a_non_tunable_law_field_names_the_tunable_ones():
     assert "guidance.los.k1, guidance.los.k2" in str(e.value)
 
 
+@pytest.mark.parametrize("name", ["phoenix-midcourse", "deep-impact-predictive"])
+def test_a_scenario_whose_law_has_no_tunable_gain_says_so(name):
+    with pytest.raises(ScenarioError) as e:
+        resolve_gains(gj.load_scenario(name), ["guidance.los.k1"])
+    assert f"scenario {name} (" in str(e.value) and "has no tunable gain; allowed: " in str(e.value)
+
+
 def test_built_in_terms_match_numpy_and_their_relaxations_tend_to_them():
     from typing import NamedTuple
 

@@ -90,6 +90,12 @@ def resolve_gains(scenario: Scenario, names) -> list[Gain]:
         names = [n.strip() for n in names.split(",") if n.strip()]
     law_name = system.law_name(scenario.config)
     own = [n for n in system.tunable_names() if n.startswith(f"guidance.{law_name}.")]
+    if not own:
+        raise ScenarioError(
+            f"params: scenario {scenario.name} ({system.name}, guidance.law = {law_name!r}) has "
+            "no tunable gain; allowed: a scenario whose law declares tunable gains (gnc-jax "
+            "list --fields)"
+        )
     if not names:
         raise ScenarioError(f"params: none given; allowed: {', '.join(own)}")
     gains = []
