@@ -38,7 +38,7 @@ from .cells import run_cells
 from .montecarlo import ANNOUNCE_S, MAX_HOURS
 from .planner import duration_text, estimate_cost
 from .scenario import Scenario, ScenarioError
-from .study import run_study
+from .study import check_seed, run_study
 
 SIMULATED, INFEASIBLE, REFUSED = "simulated", "infeasible", "refused"
 CELL_OVERHEAD_S = 0.07
@@ -75,6 +75,11 @@ def parse_grid(spec: str) -> tuple[str, list[float]]:
         ) from None
     if not all(math.isfinite(v) for v in values):
         raise ScenarioError(f"--grid {spec}: values must be finite numbers")
+    if ":" in text and len(values) == 1 and float(a) != float(b):
+        raise ScenarioError(
+            f"--grid {spec}: one value cannot span {a} .. {b}; allowed: n >= 2, or the single "
+            f"value alone (--grid {key}={a})"
+        )
     return key, [round(v, 12) for v in values]
 
 
@@ -124,7 +129,16 @@ def grid_axes(grid) -> dict[str, list[float]]:
     """The axes ``{section.field: values}`` of ``grid`` (a mapping, or specs for
     :func:`parse_grid`); a field given twice is refused."""
     if isinstance(grid, dict):
-        return dict(grid)
+        for key, values in grid.items():
+            if (
+                isinstance(values, (str, bytes))
+                or not hasattr(values, "__len__")
+                or not len(values)
+            ):
+                raise ScenarioError(
+                    f"grid: {key} = {values!r}; allowed: a non-empty list of the field's values"
+                )
+        return {key: list(values) for key, values in grid.items()}
     if isinstance(grid, str):
         raise ScenarioError(
             f"grid: the single string {grid!r}; allowed: a list of section.field=a:b:n specs "
@@ -227,7 +241,7 @@ def envelope(
         raise ScenarioError(f"runs: {runs!r}; allowed: an integer >= 1")
     if isinstance(max_hours, bool) or not isinstance(max_hours, (int, float)) or not max_hours > 0:
         raise ScenarioError(f"max_hours: {max_hours!r}; allowed: a number > 0")
-    seed = scenario.seed if seed is None else seed
+    seed = check_seed(scenario.seed if seed is None else seed)
     system = scenario.system
     backend = select(device)
     _checked_cost(scenario, axes, runs, backend, max_hours, progress)

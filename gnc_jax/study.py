@@ -232,6 +232,14 @@ def run_study(
             store.close()
 
 
+def check_seed(seed) -> int:
+    """``seed`` when it is a root seed, an integer in [0, 2^32); :class:`ScenarioError`
+    naming it otherwise."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**32:
+        raise ScenarioError(f"seed: {seed!r}; allowed: an integer in [0, 2^32)")
+    return seed
+
+
 def _check_request(
     runs, seed, chunk_size, out, resume, overwrite, client, workers, max_hours,
     max_memory_fraction,
@@ -239,8 +247,7 @@ def _check_request(
     """:class:`ScenarioError` naming the first bad argument of :func:`run_study`."""
     if isinstance(runs, bool) or not isinstance(runs, int) or runs <= 0:
         raise ScenarioError(f"runs: {runs!r}; allowed: an integer >= 1")
-    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**32:
-        raise ScenarioError(f"seed: {seed!r}; allowed: an integer in [0, 2^32)")
+    check_seed(seed)
     if chunk_size is not None and (
         isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size <= 0
     ):

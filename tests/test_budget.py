@@ -236,3 +236,11 @@ def test_a_metric_without_enough_ok_runs_says_how_many():
     budget.update(counts=dict(runs=8, all_on_ok=8, sobol_ok=8, oat_ok=8))
     budget["checks"]["y"]["all_on_variance"] = 0.0
     assert format_table(budget) == ("y: no variance (the same in every run): nothing to share")
+
+
+def test_a_budget_seed_out_of_range_is_refused_before_any_design(monkeypatch):
+    from gnc_jax.budget import engine
+
+    monkeypatch.setattr(engine, "run_study", lambda *a, **k: pytest.fail("ran"))
+    with pytest.raises(gj.ScenarioError, match=r"seed: 4294967296; allowed: an integer in"):
+        gj.budget(gj.load_scenario("deep-impact-los"), runs=8, seed=2**32)

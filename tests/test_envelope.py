@@ -34,6 +34,24 @@ def test_grid_specs_parse_and_bad_ones_name_the_axis():
             envelope_module.parse_grid(bad)
 
 
+@pytest.mark.parametrize(
+    "grid,kw,message",
+    [
+        ({"guidance.los.k1": 3.0}, {}, "grid: guidance.los.k1 = 3.0; allowed: a non-empty list"),
+        ({"guidance.los.k1": []}, {}, "grid: guidance.los.k1 = []; allowed: a non-empty list"),
+        (["guidance.los.k1=2:3:1"], {}, "one value cannot span 2 .. 3; allowed: n >= 2"),
+        (["guidance.los.k1=2,3"], dict(seed=-1), "seed: -1; allowed: an integer in [0, 2^32)"),
+    ],
+)
+def test_a_bad_grid_or_seed_is_refused_before_any_cell(grid, kw, message, monkeypatch):
+    monkeypatch.setattr(envelope_module, "run_study", lambda *a, **k: pytest.fail("ran"))
+    monkeypatch.setattr(envelope_module, "estimate_cost", lambda *a, **k: pytest.fail("costed"))
+    scenario = gj.load_scenario("deep-impact-los")
+    with pytest.raises(gj.ScenarioError) as e:
+        envelope_module.envelope(scenario, grid, runs=2, progress=False, **kw)
+    assert message in str(e.value)
+
+
 def test_a_grid_value_outside_the_field_range_is_refused_before_any_study(capsys, monkeypatch):
     monkeypatch.setattr(envelope_module, "run_study", lambda *a, **k: pytest.fail("ran"))
     argv = ["envelope", "lunar-skip-entry", "--grid", "entry.fpa_deg=-20:-5:3", "--out", "/tmp/x"]

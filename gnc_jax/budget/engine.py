@@ -22,7 +22,7 @@ from tqdm.auto import tqdm
 
 from ..montecarlo import ANNOUNCE_S, MAX_HOURS, build, estimate_cost
 from ..scenario import Scenario, ScenarioError
-from ..study import run_study
+from ..study import check_seed, run_study
 from ..systems.base import get_system
 from . import estimators
 from .linear import linear_responses
@@ -93,7 +93,7 @@ def budget(
             linear pass's chunk); no index depends on them, run for run.
     """
     system = get_system(scenario.kind)
-    seed = scenario.seed if seed is None else seed
+    seed = check_seed(scenario.seed if seed is None else seed)
     metrics = _check(scenario, system, runs, metrics, tuple(methods))
     facs, inactive = factors(system, scenario, groups)
     names, n = list(facs), len(facs)
