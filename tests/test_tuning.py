@@ -314,6 +314,37 @@ def test_the_cli_passes_the_gradient_free_step_and_population(monkeypatch, tmp_p
     assert (seen["method"], seen["sigma"], seen["population"]) == ("cma", 0.3, 3)
 
 
+@pytest.mark.parametrize("max_failed,code", [(None, 3), ("0.5", 0)])
+def test_a_tune_whose_tuned_gains_fail_held_out_runs_exits_3(
+    max_failed, code, monkeypatch, capsys, tmp_path
+):
+    """Exit 3 when more than ``--max-failed`` of the tuned gains' held-out runs failed (as
+    ``run``), naming both sides' failures; the results are written either way."""
+    from gnc_jax.tuning import result as result_module
+
+    def fake_tune(scenario, names, objective, **kw):
+        heldout = dict(
+            runs=10, paired_runs=6, failed={"initial": 1, "tuned": 4}, confidence=0.95,
+            first_index=HELDOUT_OFFSET, rows=[],
+        )  # fmt: skip
+        return tune_module.TuneResult(
+            scenario, scenario, names, [3.0], [3.5], "miss_rms", "adam", 0, 4, 1, [], heldout,
+            0.0, 0.0,
+        )  # fmt: skip
+
+    monkeypatch.setattr(tune_module, "tune", fake_tune)
+    monkeypatch.setattr(result_module, "plot_training", lambda *a: None)
+    limit = [] if max_failed is None else ["--max-failed", max_failed]
+    got = cli.main(["tune", TOY, "--out", str(tmp_path), "--params", "guidance.pn.n", *limit])
+    err = capsys.readouterr().err.strip()
+    assert got == code and (tmp_path / "tuned.toml").exists()
+    if code:
+        assert err == (
+            "gnc-jax: 4 of 10 held-out runs failed with the tuned gains (1 with the initial "
+            "gains), more than --max-failed 0.01"
+        )
+
+
 def test_a_non_tunable_law_field_names_the_tunable_ones():
     with pytest.raises(ScenarioError) as e:
         resolve_gains(gj.load_scenario("deep-impact-los"), ["guidance.los.temperature"])

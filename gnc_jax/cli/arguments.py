@@ -67,15 +67,19 @@ def _max_hours(q, what: str = "a study") -> None:
     )
 
 
-def _study_limits(q) -> None:
-    _max_hours(q)
+def _max_failed(q, what: str = "runs") -> None:
     q.add_argument(
         "--max-failed",
         type=_fraction("--max-failed"),
         default=MAX_FAILED,
-        help=f"exit {EXIT_FAILED_RUNS} when more than this fraction of runs failed "
+        help=f"exit {EXIT_FAILED_RUNS} when more than this fraction of {what} failed "
         f"(default {MAX_FAILED:g})",
     )
+
+
+def _study_limits(q) -> None:
+    _max_hours(q)
+    _max_failed(q)
 
 
 def _device(q) -> None:

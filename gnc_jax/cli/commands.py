@@ -291,4 +291,15 @@ def cmd_tune(args) -> int:
     print(result.table())
     paths = result.save(args.out)
     print("wrote " + ", ".join(paths.values()))
+    heldout = result.heldout
+    if heldout and _too_many_failed(
+        dict(failed=heldout["failed"]["tuned"], runs=heldout["runs"]), args.max_failed
+    ):
+        print(
+            f"gnc-jax: {heldout['failed']['tuned']} of {heldout['runs']} held-out runs failed "
+            f"with the tuned gains ({heldout['failed']['initial']} with the initial gains), "
+            f"more than --max-failed {args.max_failed:g}",
+            file=sys.stderr,
+        )
+        return EXIT_FAILED_RUNS
     return 0
