@@ -345,6 +345,39 @@ def test_a_tune_whose_tuned_gains_fail_held_out_runs_exits_3(
         )
 
 
+def test_a_tune_over_max_hours_is_refused_in_one_line_before_compilation(
+    monkeypatch, capsys, tmp_path
+):
+    """The cost of every call the tuner makes, counted as its loops make them (the monitor's
+    checks after steps 2, 5, 8, 9 and the start; evaluations at 0, 4, 8, 9), and a tuning
+    over ``--max-hours`` refused before anything is compiled."""
+    from gnc_jax.backend import select
+    from gnc_jax.tuning import cost
+
+    def no_compile(*a, **k):
+        raise AssertionError("compiled despite a runaway cost")
+
+    sizes = dict(
+        batch=8, steps=10, population=2, train_runs=80, check_runs=5, check_every=3,
+        eval_every=4, eval_runs=7, heldout_runs=11,
+    )  # fmt: skip
+    scenario = gj.load_scenario("deep-impact-los")
+    a, b = cost.FORWARD_COST
+    estimate, _ = cost.tune_cost(scenario, select("cpu"), "adam", "forward", 2, **sizes)
+    assert estimate.runs == 10 * 8 * (a + 2 * b) + 5 * 5 + 4 * 7 + 2 * 11
+    estimate, _ = cost.tune_cost(scenario, select("cpu"), "es", "auto", 2, **sizes)
+    assert estimate.runs == 10 * 5 * 2 + 5 * 5 + 4 * 7 + 2 * 11
+    monkeypatch.setattr(tune_module.problem, "batch_function", no_compile)
+    args = ["--params", "guidance.los.k1", "--heldout", "1000000", "--max-hours", "0.01"]
+    code = cli.main(["tune", "deep-impact-los", "--out", str(tmp_path / "t"), *args])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and not (tmp_path / "t").exists()
+    assert "cost: tune of 40 steps x 64 runs x " in err and "2 x 1000000 held-out runs" in err
+    assert "allowed: at most 0.01 h" in err
+    with pytest.raises(ScenarioError, match="max_hours: 0; allowed: a finite number > 0"):
+        tune(toy(), "guidance.pn.n", max_hours=0)
+
+
 def test_a_non_tunable_law_field_names_the_tunable_ones():
     with pytest.raises(ScenarioError) as e:
         resolve_gains(gj.load_scenario("deep-impact-los"), ["guidance.los.temperature"])

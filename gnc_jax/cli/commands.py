@@ -279,6 +279,7 @@ def cmd_tune(args) -> int:
             eval_runs=args.eval_runs,
             callback=lambda rec: print(progress_line(rec, names), flush=True),
             device=args.device,
+            max_hours=args.max_hours,
         )
     print(
         f"{scenario.name}: {args.method}"

@@ -237,6 +237,7 @@ def _add_tune(sub) -> None:
     q.add_argument(
         "--eval-runs", type=_positive_int("--eval-runs"), default=256, help="runs of those"
     )
+    _max_hours(q, "a tuning")
     _max_failed(q, "the tuned gains' held-out runs")
     _device(q)
     q.set_defaults(func=cmd_tune)

@@ -11,7 +11,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..backend import placement, select
+from ..montecarlo import MAX_HOURS
 from ..scenario import Scenario, ScenarioError, load_scenario
+from .cost import checked_tune_cost
 from .evaluation import _hard_objective, evaluate_heldout
 from .objectives import parse_objective
 from .optimisers import (
@@ -52,10 +54,11 @@ def tune(
     overrides=(),
     callback: Callable[[dict], None] | None = None,
     device: str | None = None,
+    max_hours: float = MAX_HOURS,
 ) -> TuneResult:
     """Tune the gains ``params`` of ``scenario`` to minimise ``objective``.
 
-    Long only for its 22 arguments and their documentation: the steps (the checks of the
+    Long only for its 23 arguments and their documentation: the steps (the checks of the
     sizes, the tuner's loop, the selection by the training check, the held-out evaluation)
     are functions of their own.
 
@@ -94,10 +97,14 @@ def tune(
         overrides: ``section.field=value`` applied to ``scenario`` first.
         callback: called with each step's history record.
         device: ``"cpu"``, ``"gpu"`` or ``"auto"`` (default), as in :func:`gnc_jax.run_study`.
+        max_hours: refuse (before anything is compiled) a tuning whose cost estimate
+            (:func:`~gnc_jax.tuning.cost.tune_cost`: the training steps, a gradient's runs at
+            an upper bound of its measured cost, the checks and the held-out runs) exceeds
+            this many hours.
 
     Raises:
-        ScenarioError: bad input (unknown or non-tunable gain, bad objective, bad sizes),
-            before anything is compiled.
+        ScenarioError: bad input (unknown or non-tunable gain, bad objective, bad sizes, a
+            cost above ``max_hours``), before anything is compiled.
     """
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario, overrides=overrides)
@@ -108,10 +115,19 @@ def tune(
         population, check_runs, check_every, learning_rate, sigma,
     )  # fmt: skip
     _check_temperature(temperature)
+    if isinstance(max_hours, bool) or not isinstance(max_hours, Real) or not 0 < max_hours < inf:
+        raise ScenarioError(f"max_hours: {max_hours!r}; allowed: a finite number > 0")
+    check_every = max(steps // 8, 1) if check_every is None else check_every
     scenario = with_schedule_starts(scenario, params)
     gains = resolve_gains(scenario, params)
     objective_ = parse_objective(objective, scenario)
     backend = select(device)
+    checked_tune_cost(
+        scenario, backend, method, gradient, len(gains), max_hours, batch=batch, steps=steps,
+        population=population, train_runs=train_runs, check_runs=check_runs,
+        check_every=check_every, eval_every=eval_every, eval_runs=eval_runs,
+        heldout_runs=heldout_runs,
+    )  # fmt: skip
     with placement(backend):  # the gains, the runs and the optimiser on that platform
         problem = TuningProblem(scenario, gains, objective_, seed, backend)
         names = [g.name for g in gains]
@@ -125,7 +141,7 @@ def tune(
             eval_every=eval_every,
             eval_runs=eval_runs,
             check_runs=check_runs,
-            check_every=max(steps // 8, 1) if check_every is None else check_every,
+            check_every=check_every,
             check_indices=check_indices,
         )
         system = problem.system
