@@ -378,6 +378,16 @@ def test_a_tune_over_max_hours_is_refused_in_one_line_before_compilation(
         tune(toy(), "guidance.pn.n", max_hours=0)
 
 
+def test_an_exponents_sign_is_not_a_term_separator_and_the_article_fits_the_system():
+    from gnc_jax.tuning.objectives import _check_fields
+
+    objective = parse_objective("1e+3*miss_rms+2E+0*dv_mean+hit_probability(1e+2)", toy())
+    assert objective.terms == ((1000.0, "miss_rms", None), (2.0, "dv_mean", None),
+                               (1.0, "hit_probability", 100.0))  # fmt: skip
+    with pytest.raises(ScenarioError, match="which an impactor run does not have"):
+        _check_fields(parse_objective("chute_rms", toy()), ("miss_m",), "impactor")
+
+
 def test_a_non_tunable_law_field_names_the_tunable_ones():
     with pytest.raises(ScenarioError) as e:
         resolve_gains(gj.load_scenario("deep-impact-los"), ["guidance.los.temperature"])

@@ -91,6 +91,8 @@ TERMS: dict[str, ObjectiveTerm] = {
 """Built-in objective terms by name: a weighted sum of them is written ``"miss_rms+10*dv_mean"``
 (``peak_load(8)``, ``hit_probability(300)`` take an argument)."""
 
+_TERM_SEPARATOR = re.compile(r"(?<![0-9.][eE])\+")
+"""A '+' between terms, not the sign of a weight's exponent (``1e+3*miss_rms``)."""
 _TERM_RE = re.compile(r"^\s*(?:([0-9.eE+-]+)\s*\*\s*)?([a-z_]+)\s*(?:\(\s*([^)]*)\s*\))?\s*$")
 
 
@@ -181,7 +183,7 @@ def parse_objective(objective, scenario: Scenario) -> Objective:
     if not isinstance(objective, str) or not objective.strip():
         raise ScenarioError(f"objective: {objective!r}; allowed: {_allowed_objectives()}")
     terms = []
-    for part in objective.split("+"):
+    for part in _TERM_SEPARATOR.split(objective):
         m = _TERM_RE.match(part)
         name = m.group(2) if m else part.strip()
         if m is None or name not in TERMS:
@@ -231,6 +233,10 @@ def _check_fields(objective: Objective, outcome_fields: Sequence[str], kind: str
             name = next(n for _, n, _ in objective.terms if f in TERMS[n].fields)
             usable = [n for n, t in TERMS.items() if all(x in outcome_fields for x in t.fields)]
             raise ScenarioError(
-                f"objective: {name} needs the outcome {f!r}, which a {kind} run does not have;"
-                f" allowed for {kind}: {', '.join(usable)}"
+                f"objective: {name} needs the outcome {f!r}, which {_article(kind)} {kind} run "
+                f"does not have; allowed for {kind}: {', '.join(usable)}"
             )
+
+
+def _article(word: str) -> str:
+    return "an" if word[:1].lower() in "aeiou" else "a"
