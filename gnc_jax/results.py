@@ -208,8 +208,9 @@ def load_results(out_dir) -> tuple[dict, "Any", "Any"]:
     """
     out = pathlib.Path(out_dir)
     if not out.is_dir():
+        what = "a file, not a directory" if out.exists() else "no such directory"
         raise ResultsError(
-            f"{out}: no such directory; allowed: a directory written by `gnc-jax run ... --out DIR`"
+            f"{out}: {what}; allowed: a directory written by `gnc-jax run ... --out DIR`"
         )
     manifest = out / "study.json"
     if manifest.is_file():
@@ -226,6 +227,8 @@ def load_results(out_dir) -> tuple[dict, "Any", "Any"]:
             )
     legacy = not manifest.is_file() and not (out / "runs").is_dir()  # before chunk files
     runs_path = out / "runs.parquet" if legacy else out / "runs"
+    if not (out / "summary.json").exists():
+        _refuse_other_output(out)
     for path in (out / "summary.json", runs_path, out / "scenario.toml"):
         if not path.exists():
             raise ResultsError(f"{path}: missing; run `gnc-jax run ... --out {out}`")
@@ -244,3 +247,19 @@ def load_results(out_dir) -> tuple[dict, "Any", "Any"]:
             f"{summary['kind']!r} (mixed-up files?)"
         )
     return summary, runs, scenario
+
+
+def _refuse_other_output(out: pathlib.Path) -> None:
+    """:class:`ResultsError` for the directory of an envelope (``cells.parquet``) or a tuning
+    (``training.json``), whose commands write their own figures; nothing for another."""
+    if (out / "cells.parquet").is_file():
+        raise ResultsError(
+            f"{out}: an envelope's directory (cells.parquet), whose heat maps `gnc-jax envelope` "
+            "wrote there; allowed: a directory written by `gnc-jax run ... --out DIR`"
+        )
+    if (out / "training.json").is_file():
+        raise ResultsError(
+            f"{out}: a tuning's directory (training.json), whose training.png `gnc-jax tune` "
+            f"wrote there; allowed: a study of its gains, `gnc-jax run {out / 'tuned.toml'} "
+            "--out DIR`, then `gnc-jax report DIR`"
+        )

@@ -262,6 +262,22 @@ def test_report_of_missing_dir_is_an_error(tmp_path, capsys):
     assert "summary.json: missing" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(
+    "name,message",
+    [
+        ("cells.parquet", "an envelope's directory (cells.parquet)"),
+        ("training.json", "a tuning's directory (training.json)"),
+    ],
+)
+def test_report_of_another_commands_output_says_what_it_is(name, message, tmp_path, capsys):
+    (tmp_path / name).write_text("")
+    assert cli.main(["report", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and "allowed" in err and len(err.splitlines()) == 1
+    assert cli.main(["report", str(tmp_path / name)]) == 2
+    assert f"{name}: a file, not a directory" in capsys.readouterr().err
+
+
 def test_reproduce_side_by_side(tmp_path, capsys, monkeypatch):
     short = {
         name: gj.load_scenario(name, overrides=SHORT)
