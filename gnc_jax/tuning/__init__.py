@@ -23,7 +23,8 @@ at the constant T = 0.05 the same tuning reached (1.85, 1.05), 16 % better on he
 The parts, one file each: ``objectives`` (the terms and their sums), ``parametrisation``
 (the gains and their constraints), ``problem`` (the built problem and its run indices),
 ``optimisers`` (Adam and the evolution strategy), ``evaluation`` (hard logic, held-out runs),
-``result`` (:class:`TuneResult`) and ``tuner`` (:func:`tune`).
+``cost`` (the estimate checked against ``max_hours``), ``result`` (:class:`TuneResult`) and
+``tuner`` (:func:`tune`).
 """
 
 from .evaluation import evaluate_heldout, hard_objectives, heldout_table, paired_interval
