@@ -63,15 +63,11 @@ def candidate_flights(problem: NominalProblem, banks, profile_banks):
 
 
 @jax.jit
-def _boundary_errors(problem: NominalProblem, banks, profile_banks, fate):
-    """Along-track chute error (m) where the nominal stops skipping and landing, between
-    neighbouring ``banks`` whose ``fate`` (from :func:`candidate_flights`) differs in
-    whether they skip and land (bisection to 2e-9 of the bank step; 0 elsewhere).
-
-    The chute range is continuous in the first-entry bank up to such a boundary (the skip
-    flattens into a direct entry, or the Kepler arc lengthens beyond the design horizon), so
-    the ranges at the boundaries are the ends of what the design's solve can bracket."""
-    lands = fate == SKIP_LANDS
+def _edge_errors(problem: NominalProblem, a, b, a_lands, sigma_2):
+    """Along-track chute error (m) where the nominal stops skipping and landing between the
+    first-entry banks ``a`` and ``b`` (``a_lands``: whether ``a`` skips and lands) with the
+    constant second-entry bank ``sigma_2``, for each such pair (bisection to 2e-9 of the
+    interval)."""
 
     def lands_with(sigma_1, sigma_2):
         flight = fly_nominal(problem, sigma_1, sigma_2, sigma_2, V_SWITCH_INIT_MPS)
@@ -89,13 +85,32 @@ def _boundary_errors(problem: NominalProblem, banks, profile_banks, fate):
         flight = fly_nominal(problem, inside, sigma_2, sigma_2, V_SWITCH_INIT_MPS)
         return range_error_m(problem, flight)
 
-    def column(j):
-        return jax.vmap(lambda a, b, la: edge(a, b, la, profile_banks[j]))(
-            banks[:-1], banks[1:], lands[:-1, j]
-        )
+    return jax.vmap(edge)(a, b, a_lands, sigma_2)
 
-    errors = jax.vmap(column)(jnp.arange(profile_banks.shape[0])).T
-    return jnp.where(lands[:-1] != lands[1:], errors, 0.0), lands[:-1] != lands[1:]
+
+def _boundary_errors(problem: NominalProblem, banks, profile_banks, fate):
+    """Along-track chute error (m) where the nominal stops skipping and landing, between
+    neighbouring ``banks`` whose ``fate`` (from :func:`candidate_flights`) differs in
+    whether they skip and land (0 elsewhere), and where they differ: ``(errors, edge)``,
+    both of shape (banks - 1) x profile banks.
+
+    The chute range is continuous in the first-entry bank up to such a boundary (the skip
+    flattens into a direct entry, or the Kepler arc lengthens beyond the design horizon), so
+    the ranges at the boundaries are the ends of what the design's solve can bracket. Only
+    the pairs at a boundary are bisected (a few of the hundreds of neighbours), in a batch
+    padded to a power of two so that few batch sizes are compiled."""
+    banks, profile_banks = np.asarray(banks), np.asarray(profile_banks)
+    lands = np.asarray(fate) == SKIP_LANDS
+    edge = lands[:-1] != lands[1:]
+    errors = np.zeros(edge.shape)
+    i, j = np.nonzero(edge)
+    if i.size:
+        pad = max(8, 1 << (i.size - 1).bit_length()) - i.size
+        i, j = np.pad(i, (0, pad), mode="edge"), np.pad(j, (0, pad), mode="edge")
+        pairs = (banks[i], banks[i + 1], lands[i, j], profile_banks[j])
+        found = np.asarray(_edge_errors(problem, *(jnp.asarray(x) for x in pairs)))
+        errors[i, j] = found
+    return errors, edge
 
 
 def profile_bank_span() -> np.ndarray:
@@ -193,12 +208,7 @@ def require_reachable(problem: NominalProblem, entry: dict, vehicle: dict, guess
             f"{span} ({conditions(entry, vehicle)}); allowed: "
             f"{_corridor(problem, entry, banks)}"
         )
-    edge_m, edge = (
-        np.asarray(x)
-        for x in _boundary_errors(
-            problem, jnp.asarray(banks), jnp.asarray(profile_bank_span()), jnp.asarray(fate)
-        )
-    )
+    edge_m, edge = _boundary_errors(problem, banks, profile_bank_span(), fate)
     reach_km = entry["range_km"] + np.concatenate([err_m[lands], edge_m[edge]]) / 1e3
     lo, hi = float(reach_km.min()), float(reach_km.max())
     if not lo <= entry["range_km"] <= hi:

@@ -38,6 +38,13 @@ def law_and_ctx():
     return sim, law, guidance_context(sim)
 
 
+@pytest.fixture(scope="module")
+def flight():
+    """The trace of a flight of the packaged scenario (run 0): its corrector cycles are the
+    states the predictor and corrector tests start from."""
+    return gj.simulate_one(gj.load_scenario("lunar-skip-entry"), index=0, seed=0)[1]
+
+
 def state_at(altitude_m, ctx, fpa_deg=-5.0):
     return entry_state_from_conditions(
         EntryConditions(altitude_m, 10.0e3, np.radians(fpa_deg), 0.6, 1.0, 0.2), ctx.model.earth
@@ -93,8 +100,11 @@ def test_guidance_holds_then_runs_the_corrector_every_pc_every_steps(law_and_ctx
     def nav_at(y):
         return EntryNav(y, *drag_and_lift(y, m.vehicle, m.earth, m.atmosphere))
 
+    def init(nav):  # typed as step returns it: a weakly typed leaf would compile step again
+        return jax.tree_util.tree_map(lambda x: jnp.asarray(x, x.dtype), law.init(nav, ctx))
+
     high = nav_at(state_at(119e3, ctx))  # almost no load: hold
-    state = law.init(high, ctx)
+    state = init(high)
     command, held = step(state, high, 0.0, ctx)
     # the hold flies the designed first-entry bank (hold_bank = "designed"), or the scenario's
     assert int(held.phase) == 0 and float(command) == float(law.reference.first_entry_bank_rad)
@@ -107,7 +117,7 @@ def test_guidance_holds_then_runs_the_corrector_every_pc_every_steps(law_and_ctx
     nav = nav_at(y)
     n_steps = 2 * ctx.pc_every + 1
     cycles = []
-    state = law.init(nav, ctx)
+    state = init(nav)
     for k in range(n_steps):
         _, state = step(state, nav, 10.0 + k, ctx)
         assert int(state.phase) == 1
@@ -149,7 +159,7 @@ def test_reference_lookup_interpolates_as_jnp_interp(law_and_ctx):
         np.testing.assert_allclose(value, expected, rtol=1e-12, atol=1e-12 * scale)
 
 
-def test_predictor_coast_step_costs_less_accuracy_than_the_corrector_tolerance(law_and_ctx):
+def test_predictor_coast_step_costs_less_accuracy_than_the_corrector_tolerance(law_and_ctx, flight):
     """The predictor's coast steps (32 s below 0.02 g: the Kepler arc) against its 16 s steps
     throughout, at the states and the solutions of the corrector cycles of a flight: the
     predicted range errors differ by less than the corrector's tolerance, with about 30 %
@@ -164,7 +174,7 @@ def test_predictor_coast_step_costs_less_accuracy_than_the_corrector_tolerance(l
     law = dataclasses.replace(law, predictor_horizon="switch")
     assert law.predictor_coast_dt_s > law.predictor_dt_s
     fine = dataclasses.replace(law, predictor_coast_dt_s=law.predictor_dt_s)
-    _, tr = gj.simulate_one(gj.load_scenario("lunar-skip-entry"), index=0, seed=0)
+    tr = flight
     cycles = np.flatnonzero(tr.corrector_evals > 0)[::6]
     assert len(cycles) >= 6
 
@@ -223,14 +233,14 @@ def test_levelling_off_at_the_dip_is_not_a_pull_up_nor_a_second_entry(law_and_ct
     assert int(phase) == 3
 
 
-def _corrector_cycles(law_and_ctx, every=4):
+def _corrector_cycles(law_and_ctx, flight, every=4):
     """States of the corrector cycles of a flight (every ``every``-th), as batched inputs
     of the predictor: (y, t, pulled up, sigma_0 of the cycle, model)."""
     from gnc_jax.dynamics.entry import EntryState
     from gnc_jax.guidance.entry.base import EntryModel
 
     _, _, ctx = law_and_ctx
-    _, tr = gj.simulate_one(gj.load_scenario("lunar-skip-entry"), index=0, seed=0)
+    tr = flight
     i = np.flatnonzero(tr.corrector_evals > 0)[::every]
     c = ctx.model
     model = jax.vmap(lambda d, l: EntryModel(c.vehicle, c.earth, c.atmosphere, d, l))(
@@ -240,7 +250,7 @@ def _corrector_cycles(law_and_ctx, every=4):
     return y, jnp.asarray(tr.t_s[i]), jnp.asarray(tr.pulled_up[i]), tr.sigma_0_rad[i], model
 
 
-def test_corrector_rounds_equal_the_slot_wise_corrector(law_and_ctx):
+def test_corrector_rounds_equal_the_slot_wise_corrector(law_and_ctx, flight):
     """The corrector advances every run of a batch to its next prediction as soon as its own
     ends (rounds of ROUND_STEPS predictor steps): at the cycles of a flight, batched (runs of
     different prediction counts and lengths side by side), it returns what the corrector whose
@@ -250,7 +260,7 @@ def test_corrector_rounds_equal_the_slot_wise_corrector(law_and_ctx):
     from gnc_jax.root_finding import bounded_regula_falsi_with_aux
 
     _, law, ctx = law_and_ctx
-    y, t, up, sigma, model = _corrector_cycles(law_and_ctx)
+    y, t, up, sigma, model = _corrector_cycles(law_and_ctx, flight)
     offsets = np.resize(np.radians([0.0, 2.0, -7.0, 12.0, -0.3]), len(sigma))
     start = jnp.asarray(sigma + offsets)
 
@@ -284,6 +294,18 @@ def test_corrector_rounds_equal_the_slot_wise_corrector(law_and_ctx):
             np.testing.assert_allclose(getattr(batched, name)[i], getattr(one, name), rtol=1e-9)
 
 
+def corrector_solves(ctx, law, y, t, up, s0, model, loop_kind="lax"):
+    """The corrector's solves of a batch of cycles (enabled), the law an argument as in a
+    study."""
+
+    def one(y, t, up, s0, m):
+        return correct(
+            law, y, t, up, s0, m, ctx.target_fixed, jnp.asarray(True), loop_kind=loop_kind
+        )
+
+    return jax.vmap(one)(y, t, up, s0, model)
+
+
 def assert_same_solve(a, b):
     """The same solve: statuses, counts and step costs identical, floats to the slot-wise test's
     1e-9 (two programs of the same arithmetic differ by XLA's fusion only: 2e-16 relative in a
@@ -301,7 +323,7 @@ def assert_same_solve(a, b):
             np.testing.assert_array_equal(x, y, err_msg=name)
 
 
-def test_corrector_loop_kinds_and_layouts_equal_the_while_loop(law_and_ctx):
+def test_corrector_loop_kinds_and_layouts_equal_the_while_loop(law_and_ctx, flight):
     """The corrector's rounds as a masked scan of their bound (``loop_kind = "fixed"``), in an
     accelerator's layout (``LoopShape.early_exit`` false: a round's predictor steps a masked
     scan of ``ROUND_STEPS`` unrolled whole, instead of a ``while_loop`` that stops when every
@@ -310,48 +332,34 @@ def test_corrector_loop_kinds_and_layouts_equal_the_while_loop(law_and_ctx):
     (``"checkpointed"``, the ``lax`` solve): the next test. The capsule's closed loop in the
     accelerator's layout otherwise: tests/test_loop_shape.py."""
     _, law, ctx = law_and_ctx
-    y, t, up, sigma, model = _corrector_cycles(law_and_ctx, every=6)
+    y, t, up, sigma, model = _corrector_cycles(law_and_ctx, flight, every=6)
     start = jnp.asarray(sigma + np.resize(np.radians([0.0, 2.0, -7.0]), len(sigma)))
-    runs = (y, t, up, start, model)
-
-    def solve(kind):
-        def one(y, t, up, s0, m):
-            return correct(
-                law, y, t, up, s0, m, ctx.target_fixed, jnp.asarray(True), loop_kind=kind
-            )
-
-        return jax.vmap(one)(*runs)
-
-    lax_ = jax.jit(lambda: solve("lax"))()
-    fixed = jax.jit(lambda: solve("fixed"))()  # no loop predicate
+    runs = (law, y, t, up, start, model)
+    solve = lambda kind: lambda *a: corrector_solves(ctx, *a, loop_kind=kind)  # noqa: E731
+    lax_ = jax.jit(solve("lax"))(*runs)  # the unfenced program of the next test
+    fixed = jax.jit(solve("fixed"))(*runs)  # no loop predicate
     accelerator = for_platform("gpu", gj.get_system("capsule"))
     assert not accelerator.early_exit and loop_shape().early_exit
     with using_loop_shape(accelerator):  # a new function: JAX caches a trace, not the layout
-        unrolled = jax.jit(lambda: solve("lax"))()
+        unrolled = jax.jit(solve("lax"))(*runs)
     assert len(set(np.asarray(lax_.n_evals_early_exit).tolist())) >= 2
     assert_same_solve(fixed, lax_)
     assert_same_solve(unrolled, lax_)
 
 
-def test_the_predictor_step_is_fenced_for_large_batches_only(law_and_ctx):
+def test_the_predictor_step_is_fenced_for_large_batches_only(law_and_ctx, flight):
     """A study's chunk of at least FENCE_MIN_LANES runs per device computes the predictor
     step's stages, phase logic and next bank once into memory (conditionals in the compiled
     corrector, the law an argument as in a study); a smaller one leaves them to fusion. Both
     solve alike at the cycles of a flight (:func:`assert_same_solve`)."""
     _, law, ctx = law_and_ctx
-    y, t, up, sigma, model = _corrector_cycles(law_and_ctx, every=6)
+    y, t, up, sigma, model = _corrector_cycles(law_and_ctx, flight, every=6)
     start = jnp.asarray(sigma + np.resize(np.radians([0.0, 2.0, -7.0]), len(sigma)))
-
-    def solve(law, *runs):
-        def one(y, t, up, s0, m):
-            return correct(law, y, t, up, s0, m, ctx.target_fixed, jnp.asarray(True))
-
-        return jax.vmap(one)(*runs)
 
     conds, solves = [], []
     for lanes in (FENCE_MIN_LANES - 1, FENCE_MIN_LANES):
         with using_lanes(lanes):  # a new function each: JAX caches a trace, not the lanes
-            fn = jax.jit(lambda *a: solve(*a))
+            fn = jax.jit(lambda *a: corrector_solves(ctx, *a))
             compiled = fn.lower(law, y, t, up, start, model).compile()
         conds.append(compiled.as_text().count(" conditional("))
         solves.append(compiled(law, y, t, up, start, model))
@@ -359,7 +367,7 @@ def test_the_predictor_step_is_fenced_for_large_batches_only(law_and_ctx):
     assert_same_solve(solves[1], solves[0])
 
 
-def test_implicit_corrector_derivative_is_the_derivative_of_the_root(law_and_ctx):
+def test_implicit_corrector_derivative_is_the_derivative_of_the_root(law_and_ctx, flight):
     """Reverse mode through the corrector (``loop_kind = "checkpointed"``, what the capsule flies
     in reverse mode) returns the ``lax`` solve's values, and the derivative of its
     solution and predicted crossrange with respect to the speed at the cycle is that of the
@@ -368,7 +376,7 @@ def test_implicit_corrector_derivative_is_the_derivative_of_the_root(law_and_ctx
     (The default 5 km tolerance leaves most solutions at their warm start, where the solve's
     own derivative is zero: the root's is what reverse mode follows.)"""
     _, law, ctx = law_and_ctx
-    y, t, up, sigma, model = _corrector_cycles(law_and_ctx, every=6)
+    y, t, up, sigma, model = _corrector_cycles(law_and_ctx, flight, every=6)
     tight = eqx.tree_at(lambda l: l.range_tolerance_m, law, jnp.asarray(1e-4))
     tight = dataclasses.replace(tight, n_iter=40)
     enabled = jnp.asarray(np.arange(len(t)) % 4 != 3)
@@ -407,6 +415,7 @@ def test_implicit_corrector_derivative_is_the_derivative_of_the_root(law_and_ctx
 
 def test_midpoint_bank_at_16_s_predicts_closer_to_fine_steps_than_the_held_bank_at_8_s(
     law_and_ctx,
+    flight,
 ):
     """The predictor's default, the bank at the extrapolated mid-step speed with 16 s steps,
     predicts the range errors of the cycles of a flight closer to those of 0.5 s steps than
@@ -415,7 +424,7 @@ def test_midpoint_bank_at_16_s_predicts_closer_to_fine_steps_than_the_held_bank_
 
     _, law, ctx = law_and_ctx
     assert law.predictor_bank == "midpoint" and law.predictor_dt_s == 16.0
-    y, t, up, sigma, model = _corrector_cycles(law_and_ctx)
+    y, t, up, sigma, model = _corrector_cycles(law_and_ctx, flight)
 
     def miss(variant):
         def one(y, t, up, s0, m):
@@ -440,7 +449,7 @@ def test_midpoint_bank_at_16_s_predicts_closer_to_fine_steps_than_the_held_bank_
     assert int(jnp.sum(s_m)) < 0.75 * int(jnp.sum(s_h))
 
 
-def test_switch_point_is_smooth_in_the_bank(law_and_ctx):
+def test_switch_point_is_smooth_in_the_bank(law_and_ctx, flight):
     """The range error along sigma_0 near a solution at the peak load (where it is steepest,
     about 1000 km per degree) departs from a cubic by well under the corrector's 5 km
     tolerance: the switch point is located inside the last 16 s step on the load's log-linear
@@ -448,7 +457,7 @@ def test_switch_point_is_smooth_in_the_bank(law_and_ctx):
     interpolated linearly in time the wiggles reach the tolerance, and the corrector fails to
     converge in about 1 cycle of 3000.)"""
     _, law, ctx = law_and_ctx
-    y, t, up, sigma, model = _corrector_cycles(law_and_ctx, every=1)
+    y, t, up, sigma, model = _corrector_cycles(law_and_ctx, flight, every=1)
     load = jax.vmap(lambda y, m: m.load_g(y))(y, model)
     i = int(jnp.argmax(load))
     pick = lambda a: a[i]  # noqa: E731
@@ -533,7 +542,7 @@ def test_first_entry_reversal_threshold_narrows_towards_the_kepler_load(law_and_
         assert bool(reverse) == reverses and float(sign) == (-1.0 if reverses else 1.0)
 
 
-def test_a_reference_without_a_kepler_phase_is_switched_to_on_speed(law_and_ctx):
+def test_a_reference_without_a_kepler_phase_is_switched_to_on_speed(law_and_ctx, flight):
     """``apogee_switch = "speed"`` (the default) with a reference whose switch point is an
     apogee: a pulled-up first entry starts tracking at the reference's switch speed, climbing
     or not, and not before; a Kepler arc that ends faster than that goes back to the first
@@ -568,7 +577,7 @@ def test_a_reference_without_a_kepler_phase_is_switched_to_on_speed(law_and_ctx)
         assert int(phase) == want, (phase0, pulled, dv, hdot, ng)
     # predictions of the flight's corrector cycles: the packaged (Kepler) reference ends some
     # at the switch point; the same cycles with an apogee reference all fly to the chute
-    y, t, up, sigma, model = _corrector_cycles(law_and_ctx, every=8)
+    y, t, up, sigma, model = _corrector_cycles(law_and_ctx, flight, every=8)
     kinds = {}
     for g in (law, apogee):
         batch = jax.vmap(
@@ -604,7 +613,8 @@ def test_a_predicted_dive_ends_short_instead_of_diverging(law_and_ctx):
         pull = jnp.asarray(False)
         return predict(g, y, 0.0, pull, jnp.radians(180.0), model, ctx.target_fixed)
 
-    unguarded = eqx.tree_at(lambda g: g.predictor_dive_load_g, law, 1000.0)
+    dive_load = jnp.asarray(1000.0, law.predictor_dive_load_g.dtype)  # one lift_down program
+    unguarded = eqx.tree_at(lambda g: g.predictor_dive_load_g, law, dive_load)
     guarded, diverged = lift_down(law), lift_down(unguarded)
     fine = lift_down(dataclasses.replace(unguarded, predictor_dt_s=1.0, predictor_coast_dt_s=1.0))
     assert int(fine.kind) == 1 and float(fine.miss_m) < -1000e3  # lands far short

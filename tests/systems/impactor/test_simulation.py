@@ -198,13 +198,15 @@ def test_camera_misalignment_acts_as_an_unknown_attitude_bias(monkeypatch):
     sigma = 300e-6  # rad: misses of hundreds of metres, against tens without it
     unknown = SHORT + ["navigation.consider_attitude_bias=false", "errors.attitude_bias_urad=0.0"]
     base, law = gj.build(gj.load_scenario("deep-impact-los", overrides=unknown))
-    biased = eqx.tree_at(lambda s: s.errors.attitude_bias_rad, base, jnp.asarray(sigma))
+    # leaves of the built dtype (a weakly typed scalar would be another program to compile)
+    as_leaf = lambda x: jnp.full_like(base.errors.attitude_bias_rad, x)  # noqa: E731
+    biased = eqx.tree_at(lambda s: s.errors.attitude_bias_rad, base, as_leaf(sigma))
     mis = gj.build(
         gj.load_scenario(
             "deep-impact-los", overrides=unknown + ["errors.camera_misalignment_urad=1"]
         )
     )[0]
-    mis = eqx.tree_at(lambda s: s.errors.camera_misalignment_rad, mis, jnp.asarray(-sigma))
+    mis = eqx.tree_at(lambda s: s.errors.camera_misalignment_rad, mis, as_leaf(-sigma))
     assert mis.camera_misaligned and not base.camera_misaligned
     keys = jax.vmap(lambda i: gj.run_key(0, i))(jnp.arange(8))
     run = jax.jit(jax.vmap(lambda s, k: simulation.simulate(s, law, k)[0], in_axes=(None, 0)))
