@@ -15,6 +15,7 @@ from tqdm.auto import tqdm
 
 from ...schema import ScenarioError
 from .design import design_at_the_edge, design_with_fallback, edge_notice
+from .design_reach import require_design_reach
 from .nominal import NominalProblem
 from .reach import require_reachable
 from .reference import ReferenceTrajectory
@@ -39,7 +40,8 @@ def reference_for(problem: NominalProblem, description: dict, **design_kwargs):
     (``reference-<hash>.npz`` in :func:`cache_dir`, then the packaged copy shipped with
     gnc_jax). It holds the scenario's ``entry`` and ``vehicle`` sections, which the refusals
     quote. A cache miss first refuses a target the design cannot reach
-    (:func:`~gnc_jax.guidance.entry.reach.require_reachable`, a few seconds), then runs
+    (:func:`~gnc_jax.guidance.entry.reach.require_reachable` and
+    :func:`~gnc_jax.guidance.entry.design_reach.require_design_reach`, a few seconds), then runs
     :func:`~gnc_jax.guidance.entry.design.design` (about a minute), refuses a design that did
     not converge (:func:`~gnc_jax.guidance.entry.design.require_design`), tabulates the
     reference (:func:`~gnc_jax.guidance.entry.tabulate.tabulate_reference`, about 20 s) and
@@ -82,6 +84,8 @@ def reference_for(problem: NominalProblem, description: dict, **design_kwargs):
                 if not str(refusal).startswith("entry.range_km"):
                     raise
                 nearest, edge = None, refusal
+            if nearest is not None:  # inside the hull of the banks' ranges: in the design's?
+                require_design_reach(problem, entry, vehicle)
             bar.update()
 
             retry = []

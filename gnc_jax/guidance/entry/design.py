@@ -21,6 +21,7 @@ import optax
 
 from ...schema import ScenarioError
 from .base import flight_variables
+from .design_reach import intervals_text, range_refusal
 from .nominal import (
     LANDS_WITHOUT_SKIP,
     NEVER_LANDS,
@@ -189,26 +190,15 @@ def design_by_profile(
     sigma_1, a, b = solve_profile_design(problem, *(bounds or ()))
     if sigma_1 is None:  # a: the chute range errors the scan brackets (m, intervals)
         lo2, hi2 = (math.degrees(x) for x in (PROFILE_BOUNDS_RAD if bounds is None else bounds[1]))
-        reach = (
-            _intervals_text(a, entry["range_km"])
+        raise range_refusal(
+            entry,
+            vehicle,
+            intervals_text(a, entry["range_km"])
             if a
             else "none: no first-entry bank skips and lands with every second-entry bank "
-            f"from {lo2:.0f} to {hi2:.0f} deg"
-        )
-        raise ScenarioError(
-            f"entry.range_km: {entry['range_km']:g} km; allowed: a range the reference design "
-            f"reaches with a skip ({reach}; {conditions(entry, vehicle)})"
+            f"from {lo2:.0f} to {hi2:.0f} deg",
         )
     return DesignResult(sigma_1, a, a, b, [])
-
-
-def _intervals_text(intervals_m, range_km: float) -> str:
-    """Chute range errors (m) as ranges (km): "a .. b km", "a .. b or c .. d km",
-    "a .. b, c .. d or e .. f km"."""
-    parts = [f"{range_km + lo / 1e3:.0f} .. {range_km + hi / 1e3:.0f}" for lo, hi in intervals_m]
-    if len(parts) > 1:
-        parts = [", ".join(parts[:-1]) + " or " + parts[-1]]
-    return f"{parts[0]} km"
 
 
 def design_at_the_edge(

@@ -95,18 +95,44 @@ def reachable_intervals(err_m: np.ndarray, fate: np.ndarray) -> list[tuple[float
     farther shifts every error by ``-d`` and is bracketed exactly when ``d`` lies in one of
     these intervals."""
     lands = (fate == SKIP_LANDS).all(axis=1)
-    spans = sorted(
+    return merged_intervals(
         (float(err_m[i, -1]), float(err_m[i, 0]))
         for i in np.flatnonzero(lands)
         if err_m[i, 0] >= err_m[i, -1]
     )
+
+
+def merged_intervals(spans) -> list[tuple[float, float]]:
+    """The union of the intervals ``spans`` (``(lo, hi)`` pairs) as disjoint intervals in
+    increasing order."""
     merged: list[tuple[float, float]] = []
-    for lo, hi in spans:
+    for lo, hi in sorted(spans):
         if merged and lo <= merged[-1][1]:
             merged[-1] = (merged[-1][0], max(merged[-1][1], hi))
         else:
             merged.append((lo, hi))
     return merged
+
+
+def first_entry_scan(
+    problem: NominalProblem,
+    first_entry_bounds=SIGMA_1_BOUNDS_RAD,
+    profile_bounds=PROFILE_BOUNDS_RAD,
+):
+    """The design's scan: ``(banks, scan, err_m, fate)``, the first-entry banks (rad, a
+    ``FIRST_ENTRY_SCAN_STEP_RAD`` grid over ``first_entry_bounds``), the constant
+    second-entry banks (rad, ``PROFILE_SCAN_RAD`` or as many over ``profile_bounds``) and the
+    chute range errors (m) and fates of the nominal flown with each pair (banks x scan)."""
+    lo, hi = first_entry_bounds
+    banks = np.append(np.arange(lo, hi, FIRST_ENTRY_SCAN_STEP_RAD), hi)
+    scan = (
+        PROFILE_SCAN_RAD
+        if tuple(profile_bounds) == PROFILE_BOUNDS_RAD
+        else np.linspace(*profile_bounds, PROFILE_SCAN_RAD.size)
+    )
+    flights = candidate_flights(problem, jnp.asarray(banks), jnp.asarray(scan))
+    err_m, fate = (np.asarray(x) for x in flights)
+    return banks, scan, err_m, fate
 
 
 def solve_profile_design(
@@ -120,15 +146,7 @@ def solve_profile_design(
     (:func:`reachable_intervals`; empty when no row skips and lands at every scanned
     second-entry bank). ``first_entry_bounds``, ``profile_bounds``: the banks (rad) sigma_1
     and sigma_2 are sought within."""
-    lo, hi = first_entry_bounds
-    banks = np.append(np.arange(lo, hi, FIRST_ENTRY_SCAN_STEP_RAD), hi)
-    scan = (
-        PROFILE_SCAN_RAD
-        if tuple(profile_bounds) == PROFILE_BOUNDS_RAD
-        else np.linspace(*profile_bounds, PROFILE_SCAN_RAD.size)
-    )
-    flights = candidate_flights(problem, jnp.asarray(banks), jnp.asarray(scan))
-    err_m, fate = (np.asarray(x) for x in flights)
+    banks, scan, err_m, fate = first_entry_scan(problem, first_entry_bounds, profile_bounds)
     row = choose_first_entry_bank(err_m, fate)
     if row is None:
         return None, reachable_intervals(err_m, fate), None
