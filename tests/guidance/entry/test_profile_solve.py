@@ -195,6 +195,7 @@ def test_a_design_at_the_edge_says_so_again_when_its_cached_reference_is_read(
         description = {"entry": {"range_km": range_km}, "vehicle": {}}
         if not notice:  # a standard design
             monkeypatch.setattr(cache, "require_reachable", lambda *_, **__: (0, 0, 1.3))
+            monkeypatch.setattr(cache, "require_design_reach", lambda *_, **__: None)
             monkeypatch.setattr(cache, "design_with_fallback", lambda *_, **__: edge)
         cache.reference_for(None, description)
         capsys.readouterr()
