@@ -17,7 +17,8 @@ line naming the field, and so does a field given on two axes. So does an envelop
 estimate exceeds ``max_hours``: the cells' :func:`~gnc_jax.estimate_cost` (every cell's,
 infeasible ones included, or on a grid of more than ``COST_SAMPLE`` cells their mean over that
 many cells spread over the grid, times the cells) plus ``CELL_OVERHEAD_S`` per cell, refused
-before the cells are validated; an estimate above ``ANNOUNCE_S`` is printed.
+before the cells are validated; an estimate above ``ANNOUNCE_S`` is printed. A grid of more
+than ``MAX_CELLS`` cells, or an axis of more values, is refused when its specs are read.
 """
 
 import dataclasses
@@ -48,6 +49,10 @@ Measured: ``deep-impact-los`` (its test overrides), 20 cells of 2 runs on the 2-
 0.074 s per cell after the first, of which the runs' estimate is 0.002 s."""
 COST_SAMPLE = 256
 """Cells costed, at most: a larger grid's runs are estimated from this many of its cells."""
+MAX_CELLS = int(MAX_HOURS * 3600 / CELL_OVERHEAD_S)
+"""Cells of a grid, and values of an axis, at most (1,234,285): the cells whose
+``CELL_OVERHEAD_S`` alone fills the default ``MAX_HOURS``. Checked when the axes are read,
+before their values are made, whatever ``max_hours``: a larger sweep is several envelopes."""
 
 
 def parse_grid(spec: str) -> tuple[str, list[float]]:
@@ -65,7 +70,7 @@ def parse_grid(spec: str) -> tuple[str, list[float]]:
             n_val = int(n)
             if n_val < 1:
                 raise ValueError
-            values = np.linspace(float(a), float(b), n_val).tolist()
+            a_val, b_val = float(a), float(b)
         else:
             values = [float(x) for x in text.split(",")]
     except ValueError:
@@ -73,6 +78,14 @@ def parse_grid(spec: str) -> tuple[str, list[float]]:
             f"--grid {spec}: {text!r} is not a:b:n or a list of numbers; allowed: two numbers "
             "and a whole number of values n >= 1 (e.g. -6.5:-5.5:5), or v1,v2,..."
         ) from None
+    if ":" in text:
+        if n_val > MAX_CELLS:
+            raise ScenarioError(
+                f"--grid {spec}: {n_val} values; allowed: at most {MAX_CELLS} values on an axis "
+                f"and cells on the grid (their {CELL_OVERHEAD_S:g} s per cell alone take "
+                f"{MAX_HOURS:g} h; split the sweep)"
+            )
+        values = np.linspace(a_val, b_val, n_val).tolist()
     if not all(math.isfinite(v) for v in values):
         raise ScenarioError(f"--grid {spec}: values must be finite numbers")
     if ":" in text and len(values) == 1 and float(a) != float(b):
@@ -138,7 +151,7 @@ def grid_axes(grid) -> dict[str, list[float]]:
                 raise ScenarioError(
                     f"grid: {key} = {values!r}; allowed: a non-empty list of the field's values"
                 )
-        return {key: list(values) for key, values in grid.items()}
+        return _checked_size({key: list(values) for key, values in grid.items()}, "grid")
     if isinstance(grid, str):
         raise ScenarioError(
             f"grid: the single string {grid!r}; allowed: a list of section.field=a:b:n specs "
@@ -153,6 +166,19 @@ def grid_axes(grid) -> dict[str, list[float]]:
                 "(its values as a:b:n or v1,v2,...)"
             )
         axes[key] = values
+    return _checked_size(axes, "--grid")
+
+
+def _checked_size(axes: dict[str, list[float]], where: str) -> dict[str, list[float]]:
+    """``axes``, refused (:class:`ScenarioError`) when the grid has more than ``MAX_CELLS``
+    cells."""
+    n_cells = math.prod(len(v) for v in axes.values())
+    if n_cells > MAX_CELLS:
+        sizes = " x ".join(f"{key} {len(v)}" for key, v in axes.items())
+        raise ScenarioError(
+            f"{where}: {sizes} = {n_cells} cells; allowed: at most {MAX_CELLS} cells (their "
+            f"{CELL_OVERHEAD_S:g} s per cell alone take {MAX_HOURS:g} h; split the sweep)"
+        )
     return axes
 
 
@@ -329,6 +355,7 @@ __all__ = [
     "CELL_OVERHEAD_S",
     "COST_SAMPLE",
     "Envelope",
+    "MAX_CELLS",
     "envelope",
     "grid_axes",
     "parse_grid",

@@ -114,10 +114,49 @@ def test_an_envelope_over_its_cost_is_refused_before_any_study(monkeypatch):
     assert len(costed) == envelope_module.COST_SAMPLE
 
     monkeypatch.setattr(envelope_module, "_cell_scenarios", _no_study)
-    huge = {"guidance.los.k1": [4.0] * 2000, "guidance.los.k2": [1.0] * 1000}
-    with pytest.raises(gj.ScenarioError, match=r"^cost: 2000000 cells, more than 39 h at"):
-        gj.envelope(sc, huge, runs=2, progress=False)
+    huge = {"guidance.los.k1": [4.0] * 2000, "guidance.los.k2": [1.0] * 100}
+    with pytest.raises(gj.ScenarioError, match=r"^cost: 200000 cells, more than 3.9 h at"):
+        gj.envelope(sc, huge, runs=2, progress=False, max_hours=2.0)
     assert len(costed) == envelope_module.COST_SAMPLE  # no cell built
+
+
+@pytest.mark.parametrize(
+    "grid,message",
+    [
+        (
+            ["guidance.los.k1=3:5:1000000000"],
+            "--grid guidance.los.k1=3:5:1000000000: 1000000000 values; allowed: at most "
+            "1234285 values on an axis",
+        ),
+        (
+            [f"{k}=1:2:10000" for k in ("guidance.los.k1", "guidance.los.k2", "guidance.dt_s")],
+            "--grid: guidance.los.k1 10000 x guidance.los.k2 10000 x guidance.dt_s 10000 = "
+            "1000000000000 cells; allowed: at most 1234285 cells",
+        ),
+        (
+            {"guidance.los.k1": [4.0] * 2000, "guidance.los.k2": [1.0] * 1000},
+            "grid: guidance.los.k1 2000 x guidance.los.k2 1000 = 2000000 cells; allowed",
+        ),
+    ],
+)
+def test_a_grid_over_max_cells_is_refused_before_its_values_are_made(grid, message, monkeypatch):
+    """MAX_CELLS is the grid whose per-cell overhead alone fills the default MAX_HOURS; a
+    larger axis or grid is refused whatever max_hours, before linspace or any cell."""
+    assert envelope_module.MAX_CELLS * envelope_module.CELL_OVERHEAD_S <= 24 * 3600
+    assert (envelope_module.MAX_CELLS + 1) * envelope_module.CELL_OVERHEAD_S > 24 * 3600
+    linspace = np.linspace
+
+    def small_linspace(a, b, n):
+        assert n <= envelope_module.MAX_CELLS, "made"
+        return linspace(a, b, n)
+
+    monkeypatch.setattr(np, "linspace", small_linspace)
+    monkeypatch.setattr(envelope_module, "_cell_scenarios", _no_study)
+    monkeypatch.setattr(envelope_module, "estimate_cost", lambda *a, **k: pytest.fail("costed"))
+    scenario = gj.load_scenario("deep-impact-los")
+    with pytest.raises(gj.ScenarioError) as e:
+        gj.envelope(scenario, grid, runs=2, progress=False, max_hours=1e12)
+    assert message in str(e.value)
 
 
 def test_cells_are_the_studies_of_their_scenarios(tmp_path):
