@@ -202,7 +202,9 @@ def _compile_local(system, seed, chunk, plan: LocalPlan) -> LocalPlan:
 def _run_local(system, seed, todo, chunk, plan: LocalPlan):
     """The chunks ``todo`` on this process's devices, with the executable of
     :func:`_compile_local`; returns the compile time and the ``time.perf_counter()`` at which
-    the runs started."""
+    the runs started (no compile time and no executable without ``todo``)."""
+    if not todo:
+        return 0.0, time.perf_counter()
     with placement(plan.backend):
         sim, law = plan.built
         seed_arr = _seed_array(seed)
@@ -215,8 +217,7 @@ def _run_local(system, seed, todo, chunk, plan: LocalPlan):
         # One chunk ahead: a device that finishes its share of a chunk starts on the next
         # while the other devices and the host are still on this one.
         t0 = time.perf_counter()
-        if todo:
-            pending = launch(todo[0])
+        pending = launch(todo[0])
         for k, c in enumerate(todo):
             outs = pending
             if k + 1 < len(todo):

@@ -275,7 +275,7 @@ class StudyStore:
 
     # -- chunks --------------------------------------------------------------------------
     def chunk_path(self, c: int) -> pathlib.Path:
-        return self.runs_dir / f"chunk-{c:06d}.parquet"
+        return _chunk_path(self.path, c)
 
     def write_chunk(self, c: int, start: int, outcomes: dict[str, np.ndarray]) -> None:
         """Write chunk ``c`` (runs ``start`` ...) atomically, with its checksum."""
@@ -289,25 +289,9 @@ class StudyStore:
         table = table.replace_schema_metadata({**(table.schema.metadata or {}), **meta})
         _atomic_write(self.chunk_path(c), lambda p: pq.write_table(table, p))
 
-    def valid_chunk(self, c: int, start: int, stop: int) -> bool:
-        """Chunk ``c`` is on disk, readable, covers runs start..stop-1 and matches its checksum."""
-        path = self.chunk_path(c)
-        if not path.is_file():
-            return False
-        try:
-            table = pq.read_table(path)
-            meta = table.schema.metadata or {}
-            ok = (
-                int(meta[b"gnc_jax.start"]) == start
-                and int(meta[b"gnc_jax.stop"]) == stop
-                and table.num_rows == stop - start
-                and meta[b"gnc_jax.sha256"].decode() == _checksum(table)
-            )
-        except (pa.ArrowException, OSError, KeyError, ValueError):
-            ok = False
-        if not ok:
-            path.unlink()
-        return ok
+    def discard_chunk(self, c: int) -> None:
+        """Remove chunk ``c``'s file, if any (a damaged chunk before it is computed again)."""
+        self.chunk_path(c).unlink(missing_ok=True)
 
     def finish(self, summary: dict, scenario_toml: str) -> None:
         """Write the scenario and the summary, then mark the study complete (all atomic)."""
@@ -315,6 +299,37 @@ class StudyStore:
         write_text_atomic(self.path / "summary.json", json.dumps(summary, indent=2) + "\n")
         self.manifest = dict(self.manifest, state="complete")
         write_text_atomic(self.path / MANIFEST, json.dumps(self.manifest, indent=1) + "\n")
+
+
+def _chunk_valid(path: pathlib.Path, start: int, stop: int) -> bool:
+    """The chunk file ``path`` is readable, covers runs start..stop-1 and matches its checksum."""
+    if not path.is_file():
+        return False
+    try:
+        table = pq.read_table(path)
+        meta = table.schema.metadata or {}
+        return (
+            int(meta[b"gnc_jax.start"]) == start
+            and int(meta[b"gnc_jax.stop"]) == stop
+            and table.num_rows == stop - start
+            and meta[b"gnc_jax.sha256"].decode() == _checksum(table)
+        )
+    except (pa.ArrowException, OSError, KeyError, ValueError):
+        return False
+
+
+def chunks_left(path, bounds: list[tuple[int, int]]) -> list[int]:
+    """The chunks (``bounds[c]`` = its runs start..stop-1) of the study directory ``path``
+    that a resumed study computes: missing or damaged. Reads the directory only."""
+    return [
+        c
+        for c, (start, stop) in enumerate(bounds)
+        if not _chunk_valid(_chunk_path(path, c), start, stop)
+    ]
+
+
+def _chunk_path(path, c: int) -> pathlib.Path:
+    return pathlib.Path(path) / RUNS_DIR / f"chunk-{c:06d}.parquet"
 
 
 def chunk_files(path) -> list[pathlib.Path]:

@@ -31,7 +31,7 @@ from .montecarlo import (
 from .planner import estimate_cost, plan_chunk
 from .results import save_study, summarize
 from .scenario import Scenario, ScenarioError
-from .store import StudyStore, check_directory, chunk_files, code_version
+from .store import StudyStore, check_directory, chunk_files, chunks_left, code_version
 from .systems.base import get_system
 
 
@@ -210,18 +210,20 @@ def run_study(
         check_directory(out, manifest, resume, overwrite)
     # The system's checks of the scenario against its models (the capsule's reach check and
     # reference design) and the memory bound on the compiled batch refuse a study before its
-    # directory is written: a refused study leaves nothing to resume. Dask workers are sent
-    # what was built here and compile their own chunks.
+    # directory is written: a refused study leaves nothing to resume; a resumed study with no
+    # chunk left compiles nothing. Dask workers are sent what was built here and compile their
+    # own chunks.
     built = build_on(backend, scenario)
     keys = seed if draws is None else draws
     plan = LocalPlan(backend, n_devices, max_memory_fraction, fixed, None, built)
-    if not distributed:
+    todo = chunks_left(out, bounds) if resume else list(range(n_chunks))
+    if not distributed and todo:
         plan = _compile_local(system, keys, chunk, plan)
     store = None if out is None else StudyStore(out, manifest, resume, overwrite)
     try:
         parts, compile_s, wall_s, n_workers, write_s = _run_chunks(
-            scenario, system, keys, runs, chunk, bounds, store, progress, announce, distributed,
-            plan, client, workers, device,
+            scenario, system, keys, runs, chunk, bounds, todo, store, progress, announce,
+            distributed, plan, client, workers, device,
         )  # fmt: skip
         return _finish(
             scenario, runs, seed, parts, n_chunks, store, compile_s, wall_s, n_dev, chunk,
@@ -323,15 +325,17 @@ def _manifest(scenario, seed, runs, chunk) -> dict:
 
 
 def _run_chunks(
-    scenario, system, seed, runs, chunk, bounds, store, progress, announce, distributed,
+    scenario, system, seed, runs, chunk, bounds, todo, store, progress, announce, distributed,
     plan, client, workers, device,
 ):  # fmt: skip
-    """The chunks not yet in ``store``, run locally (``plan``) or on Dask workers with a
-    progress bar; each finished chunk goes to ``store`` (else into the returned ``parts``).
-    Returns ``(parts, compile_s, wall_s, workers, write_s)``, ``wall_s`` less ``write_s``;
-    :class:`StudyError` if chunks raised."""
+    """The chunks ``todo`` (those not yet in ``store``; a damaged file of one is removed
+    first), run locally (``plan``) or on Dask workers with a progress bar; each finished chunk
+    goes to ``store`` (else into the returned ``parts``). Returns ``(parts, compile_s, wall_s,
+    workers, write_s)``, ``wall_s`` less ``write_s``; :class:`StudyError` if chunks raised."""
     n_chunks = len(bounds)
-    todo = [c for c in range(n_chunks) if store is None or not store.valid_chunk(c, *bounds[c])]
+    if store is not None:
+        for c in todo:
+            store.discard_chunk(c)
     show = (
         progress if progress is not None else (n_chunks > 1 and (sys.stderr.isatty() or announce))
     )

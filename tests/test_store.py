@@ -144,6 +144,11 @@ def test_damaged_chunks_are_detected_and_recomputed(toy, reference, tmp_path, mo
     assert sorted(written) == [1, 2, 4]
     assert not list((out / "runs").glob(".*.tmp"))
     _equal(study.outcomes, reference)
+    # a complete study resumed has nothing left to run: it compiles nothing
+    monkeypatch.setattr(gj.study, "_compile_local", lambda *a: pytest.fail("compiled"))
+    again = run_study(toy, runs=RUNS, progress=False, out=out, resume=True)
+    assert sorted(written) == [1, 2, 4] and again.compile_s == 0.0
+    _equal(again.outcomes, reference)
 
 
 def _cli(out, *extra):
