@@ -23,6 +23,7 @@ from gnc_jax import cli
 from gnc_jax import tuning as tune_module
 from gnc_jax.scenario import ScenarioError
 from gnc_jax.tuning import (
+    HELDOUT_MAX_RUNS,
     HELDOUT_OFFSET,
     Reparametrisation,
     heldout_indices,
@@ -99,6 +100,15 @@ def test_training_and_heldout_runs_never_overlap(monkeypatch):
     assert heldout_indices(3)[0] == HELDOUT_OFFSET
     with pytest.raises(ScenarioError, match="train_runs"):
         tune(toy(), "guidance.pn.n", batch=4, steps=2, train_runs=HELDOUT_OFFSET + 1)
+    # the last held-out index is the last whose key is its own: fold_in takes it modulo 2^32
+    last = HELDOUT_OFFSET + HELDOUT_MAX_RUNS - 1
+    key = lambda i: jax.random.key_data(gj.run_key(0, i)).tolist()  # noqa: E731
+    assert last == 2**32 - 1 and key(jnp.asarray(last + 1)) == key(0)
+    assert key(jnp.asarray(last, jnp.int64).astype(jnp.int32)) == key(last)  # padded's int32
+    for name in ("heldout_runs", "eval_runs"):
+        with pytest.raises(ScenarioError, match=f"^{name}: {HELDOUT_MAX_RUNS + 1}; allowed"):
+            tune(toy(), "guidance.pn.n", batch=4, steps=2, max_hours=1e12,
+                 **{name: HELDOUT_MAX_RUNS + 1})  # fmt: skip
 
     # the indices the tuner actually flies: spy on both index functions
     seen = {"train": set(), "heldout": set()}

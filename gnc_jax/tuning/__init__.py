@@ -31,7 +31,7 @@ from .evaluation import evaluate_heldout, hard_objectives, heldout_table, paired
 from .objectives import TERMS, Objective, ObjectiveTerm, parse_objective
 from .optimisers import default_optimizer, progress_line
 from .parametrisation import Gain, Reparametrisation, resolve_gains, with_schedule_starts
-from .problem import HELDOUT_OFFSET, TuningProblem, heldout_indices, train_indices
+from .problem import HELDOUT_MAX_RUNS, HELDOUT_OFFSET, TuningProblem, heldout_indices, train_indices
 from .result import TuneResult, plot_training
 from .tuner import tune
 
@@ -41,6 +41,7 @@ __all__ = [
     "Objective",
     "ObjectiveTerm",
     "TERMS",
+    "HELDOUT_MAX_RUNS",
     "HELDOUT_OFFSET",
     "Gain",
     "Reparametrisation",

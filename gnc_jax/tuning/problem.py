@@ -3,7 +3,7 @@
 **Run indices.** Run ``i`` uses ``fold_in(key(seed), i)`` as in every study. Training step
 ``s`` flies runs ``(s * batch + j) mod train_runs`` (default ``train_runs = batch * steps``: a
 fresh batch each step); held-out runs are ``HELDOUT_OFFSET + j``, and ``train_runs <=
-HELDOUT_OFFSET`` is enforced, so the two sets never share a run.
+HELDOUT_OFFSET`` and ``j < HELDOUT_MAX_RUNS`` are enforced, so the two sets never share a run.
 """
 
 import dataclasses
@@ -24,6 +24,10 @@ from .parametrisation import Gain, Reparametrisation
 
 HELDOUT_OFFSET = 2**30
 """First run index of the held-out set; training indices stay below it."""
+HELDOUT_MAX_RUNS = 2**32 - HELDOUT_OFFSET
+"""Held-out runs, at most: a run's key folds its index in modulo 2^32 (``jax.random.fold_in``
+takes a uint32), so held-out index ``2^32 + j`` would fly training run ``j``'s draws. Below
+it, the int32 indices a batch is flown with wrap to the same uint32 (the same keys)."""
 
 
 def _si_factors(scenario: Scenario, gains: list[Gain], law) -> list[float]:

@@ -25,7 +25,7 @@ from .optimisers import (
     gradient_mode,
 )
 from .parametrisation import resolve_gains, with_schedule_starts
-from .problem import HELDOUT_OFFSET, TuningProblem
+from .problem import HELDOUT_MAX_RUNS, HELDOUT_OFFSET, TuningProblem
 from .result import TuneResult
 
 
@@ -207,6 +207,12 @@ def _checked_sizes(
             f"train_runs: {train_runs}; allowed: 1 .. {HELDOUT_OFFSET} (held-out indices start "
             "there)"
         )
+    for name, value in (("heldout_runs", heldout_runs), ("eval_runs", eval_runs)):
+        if value > HELDOUT_MAX_RUNS:
+            raise ScenarioError(
+                f"{name}: {value}; allowed: at most {HELDOUT_MAX_RUNS} (held-out indices from "
+                f"{HELDOUT_OFFSET} to 2^32 - 1: a run's key takes its index modulo 2^32)"
+            )
     return train_runs
 
 
