@@ -324,6 +324,32 @@ def test_the_cli_passes_the_gradient_free_step_and_population(monkeypatch, tmp_p
     assert (seen["method"], seen["sigma"], seen["population"]) == ("cma", 0.3, 3)
 
 
+def test_an_interrupted_tune_keeps_the_steps_done(monkeypatch, capsys, tmp_path):
+    """Ctrl-C during training: the records of the steps done go to training.json, marked
+    interrupted, and the command exits 130 as an interrupted ``run``; before any step, the
+    directory it created is removed."""
+    records = [
+        dict(step=s, objective=1.0 / (s + 1), gains=[3.0 + s], temperature=None, runs=4, wall_s=s)
+        for s in range(2)
+    ]
+
+    def fake_tune(scenario, names, objective, callback=None, **kw):
+        for rec in records:
+            callback(rec)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(tune_module, "tune", fake_tune)
+    args = ["tune", TOY, "--params", "guidance.pn.n", "--steps", "5"]
+    assert cli.main([*args, "--out", str(tmp_path / "t")]) == 130
+    saved = json.loads((tmp_path / "t" / "training.json").read_text())
+    assert saved == dict(interrupted=True, steps=5, history=records)
+    err = capsys.readouterr().err
+    assert "interrupted after 2 of 5 steps" in err and "gnc-jax: interrupted" in err
+    records.clear()
+    assert cli.main([*args, "--out", str(tmp_path / "none")]) == 130
+    assert not (tmp_path / "none").exists()
+
+
 @pytest.mark.parametrize("max_failed,code", [(None, 3), ("0.5", 0)])
 def test_a_tune_whose_tuned_gains_fail_held_out_runs_exits_3(
     max_failed, code, monkeypatch, capsys, tmp_path

@@ -258,29 +258,46 @@ def cmd_tune(args) -> int:
     _device(args)
     from ..scenario import load_scenario
     from ..tuning import progress_line, tune
+    from ..tuning.result import save_interrupted
 
     scenario = load_scenario(args.scenario, overrides=args.set or ())
+    names = [n.strip() for n in args.params.split(",") if n.strip()]
+    history = []
+
+    def step_done(rec):
+        history.append(rec)
+        print(progress_line(rec, names), flush=True)
+
     with _out_dir(args.out):
-        names = [n.strip() for n in args.params.split(",") if n.strip()]
-        result = tune(
-            scenario,
-            names,
-            args.objective,
-            batch=args.batch,
-            steps=args.steps,
-            seed=args.seed,
-            method=args.method,
-            gradient=args.mode,
-            learning_rate=args.learning_rate,
-            sigma=args.sigma,
-            population=args.population,
-            heldout_runs=args.heldout,
-            eval_every=args.eval_every,
-            eval_runs=args.eval_runs,
-            callback=lambda rec: print(progress_line(rec, names), flush=True),
-            device=args.device,
-            max_hours=args.max_hours,
-        )
+        try:
+            result = tune(
+                scenario,
+                names,
+                args.objective,
+                batch=args.batch,
+                steps=args.steps,
+                seed=args.seed,
+                method=args.method,
+                gradient=args.mode,
+                learning_rate=args.learning_rate,
+                sigma=args.sigma,
+                population=args.population,
+                heldout_runs=args.heldout,
+                eval_every=args.eval_every,
+                eval_runs=args.eval_runs,
+                callback=step_done,
+                device=args.device,
+                max_hours=args.max_hours,
+            )
+        except KeyboardInterrupt:
+            if history:  # the steps done are kept; the command still exits as interrupted
+                path = save_interrupted(history, args.steps, args.out)
+                print(
+                    f"{scenario.name}: interrupted after {len(history)} of {args.steps} steps; "
+                    f"their training record in {path}",
+                    file=sys.stderr,
+                )
+            raise
     print(
         f"{scenario.name}: {args.method}"
         + (f" ({result.gradient} mode)" if result.gradient else "")

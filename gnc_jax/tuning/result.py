@@ -103,6 +103,16 @@ class TuneResult:
         return {k: str(v) for k, v in paths.items()}
 
 
+def save_interrupted(history: list[dict], steps: int, out_dir) -> pathlib.Path:
+    """Write ``training.json`` of a tuning stopped before its result: ``{"interrupted": true,
+    "steps": the steps asked for, "history": the records of the steps done}`` (a finished
+    tuning's is the list of records alone)."""
+    path = pathlib.Path(out_dir) / "training.json"
+    record = dict(interrupted=True, steps=steps, history=history)
+    path.write_text(json.dumps(record, indent=1))
+    return path
+
+
 def plot_training(result: TuneResult, path) -> None:
     """``training.png``: the objective and each gain per step."""
     from ..plotting import pyplot
