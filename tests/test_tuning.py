@@ -12,6 +12,7 @@ import os
 import pathlib
 import subprocess
 import sys
+import tracemalloc
 
 import jax
 import jax.numpy as jnp
@@ -176,6 +177,24 @@ def test_paired_bootstrap_interval_matches_the_normal_interval_of_a_mean_differe
     half = 1.96 * d.std() / np.sqrt(len(d))
     np.testing.assert_allclose(diff, d.mean(), rtol=1e-12)
     np.testing.assert_allclose([lo, hi], [d.mean() - half, d.mean() + half], atol=0.15 * half)
+
+
+def test_paired_interval_draws_one_resample_at_a_time():
+    a = np.arange(7.0)
+    b = a**2
+    stat_a, stat_b = (lambda i: a[i].mean()), (lambda i: b[i].mean())
+    draws = np.random.default_rng(3).integers(0, 7, size=(200, 7))  # all resamples at once
+    ref = np.quantile([stat_b(d) - stat_a(d) for d in draws], [0.025, 0.975])
+    _, lo, hi = paired_interval(stat_a, stat_b, 7, resamples=200, seed=3)
+    assert [lo, hi] == list(ref)
+    # held-out sets of millions of runs: the indices of one resample in memory, not of all
+    n = 2_000_000
+    x = np.zeros(n)
+    tracemalloc.start()
+    paired_interval(lambda i: x[i].mean(), lambda i: x[i].mean(), n, resamples=40)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 4 * 8 * n  # all 40 resamples' indices are 40 * 8 * n bytes
 
 
 def test_reparametrisation_keeps_k1_above_k2_and_inverts():

@@ -35,8 +35,13 @@ def paired_interval(stat_a, stat_b, n, confidence=0.95, resamples=1000, seed=0):
     all runs and its percentile-bootstrap confidence interval, each resample drawing the same
     runs for both sides (``stat_x(indices)`` evaluates a statistic on a subset of the runs)."""
     rng = np.random.default_rng(seed)
-    draws = rng.integers(0, n, size=(resamples, n))
-    diffs = np.array([stat_b(d) - stat_a(d) for d in draws])
+    # One resample's indices at a time (n of them, not resamples x n): the same draws as one
+    # (resamples, n) array, row by row.
+    diffs = []
+    for _ in range(resamples):
+        d = rng.integers(0, n, size=n)
+        diffs.append(stat_b(d) - stat_a(d))
+    diffs = np.array(diffs)
     q = (1.0 - confidence) / 2.0
     lo, hi = np.quantile(diffs, [q, 1.0 - q])
     every = np.arange(n)
