@@ -21,7 +21,8 @@ for name in ("phoenix-midcourse", "phoenix-midcourse-cd", "phoenix-midcourse-stm
     s = gj.run_study(scenario, runs=100, seed=0).summary()
     print(
         f"{scenario['guidance.autonomous.sensitivity']:>18}: |ΔB| max {s['b_err_km_max']:.3f} km, "
-        f"|Δt| max {s['tof_err_s_max']:.3f} s, goal met {s['goal_met']}/100, "
+        f"|Δt| max {s['tof_err_s_max']:.3f} s, "
+        f"goal met {s['goal_met']}/{s['runs'] - s['failed']} ok runs, "
         f"Δv mean {s['dv_mean_mps']:.3f} m/s ({s['wall_s']:.2f} s after compilation)"
     )
 study = gj.run_study(gj.load_scenario("phoenix-midcourse"), runs=100, seed=0)

@@ -31,10 +31,32 @@ def _machine_note(study) -> str:
     )
 
 
+class _Columns(dict):
+    """The outcome columns of a study on disk read so far; a column asked for later (one that
+    a statistic reads only on a branch the first chunk's runs did not take) is read then."""
+
+    def __init__(self, study, columns: dict, names):
+        super().__init__(columns)
+        self._study, self._names = study, set(names)
+
+    def __missing__(self, k):
+        if k not in self._names:
+            raise KeyError(k)
+        self[k] = self._study.columns([k])[k]
+        return self[k]
+
+    def __contains__(self, k):
+        return k in self._names
+
+    def get(self, k, default=None):
+        return self[k] if k in self._names else default
+
+
 def _statistics_outcomes(study, system) -> dict:
     """The outcomes the system's statistics read: everything for a study in memory; for one
-    on disk, only the columns that its statistics use (found on the first chunk), so that
-    the summary of a study of millions of runs reads a few columns, not the whole table."""
+    on disk, the columns that its statistics use on the first chunk, so that the summary of a
+    study of millions of runs reads a few columns, not the whole table (any other column it
+    asks for is read when asked)."""
     if study.path is None:
         return study.outcomes
     from .store import chunk_files, outcomes_from_table
@@ -61,7 +83,7 @@ def _statistics_outcomes(study, system) -> dict:
             used = set(shapes)
     except Exception:  # the probe is an optimisation: read everything instead
         used = set(shapes)
-    return study.columns(sorted(used | {"status"}))
+    return _Columns(study, study.columns(sorted(used | {"status"})), shapes)
 
 
 def summarize(study) -> dict[str, Any]:

@@ -64,3 +64,21 @@ def test_the_site_builds_without_warnings(tmp_path):
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert (tmp_path / "site" / "howto" / "add-a-law" / "index.html").is_file()
+
+
+def test_the_readme_headlines_quote_the_reproduction_table():
+    """Each README headline "miss RMS|mean paper → gnc_jax m" is the reproduction table's row
+    of that scenario, to the headline's one decimal."""
+    table = (DOCS / "explanation" / "reproduction.md").read_text()
+    rows, scenario = {}, None
+    for line in table.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) == 5 and cells[0].startswith("`"):
+            scenario = cells[0].strip("`")
+        if len(cells) == 5 and scenario:
+            rows[(scenario, cells[2])] = cells[4]
+    headline = re.compile(r"^\| `([\w-]+)`.*?\| (miss (?:RMS|mean)) [\d.]+ → ([\d.]+) m", re.M)
+    found = headline.findall((ROOT / "README.md").read_text())
+    assert len(found) >= 4
+    for name, metric, value in found:
+        assert float(value) == round(float(rows[(name, f"{metric} (m)")]), 1), (name, metric)

@@ -293,3 +293,28 @@ def test_envelope_cells_run_through_the_dask_path(toy):
     drop = ("wall_s", "compile_s")
     strip = lambda cells: [{k: v for k, v in c.items() if k not in drop} for c in cells]  # noqa: E731
     assert strip(remote.cells) == strip(local.cells) and len(local.cells) == 2
+
+
+def test_the_summary_on_disk_reads_a_column_its_first_chunk_did_not_need(toy, tmp_path):
+    """The summary of a study on disk reads the columns its statistics use on the first chunk;
+    one that a statistic reads only on a branch that chunk's runs did not take (a midcourse
+    study's iterations, read only where a run corrected) is read when asked for."""
+    from gnc_jax.results import _statistics_outcomes
+    from gnc_jax.study import Study
+
+    status = np.zeros(4, np.int32)
+    outcomes = dict(status=status, burns=np.array([0, 0, 1, 2]), iters=np.array([7, 7, 3, 5]))
+    manifest = dict(scenario_name="x", seed=0, runs=4, chunk_size=2, code_version="v")
+    with store.StudyStore(tmp_path / "s", manifest) as st:
+        for c in range(2):
+            st.write_chunk(c, 2 * c, {k: v[2 * c : 2 * c + 2] for k, v in outcomes.items()})
+
+    class System:
+        def statistics(self, o, ok):
+            burns = o["burns"][ok]
+            return {"iters": float(np.mean(o["iters"][ok][burns > 0])) if burns.any() else 0.0}
+
+    study = Study(toy, 4, 0, None, 0.0, 1.0, 1, 2, path=tmp_path / "s")
+    o = _statistics_outcomes(study, System())
+    assert System().statistics(o, status == 0) == {"iters": 4.0}
+    assert "iters" in o and o.get("nothing") is None

@@ -369,6 +369,29 @@ def test_an_interrupted_tune_keeps_the_steps_done(monkeypatch, capsys, tmp_path)
     assert not (tmp_path / "none").exists()
 
 
+def test_the_cli_names_each_knot_of_a_tuned_schedule(monkeypatch, capsys, tmp_path):
+    """A schedule is tuned knot by knot: the progress lines and the result name each knot."""
+    from gnc_jax.tuning import result as result_module
+
+    def fake_tune(scenario, names, objective, **kw):
+        gains = [4.0, 4.0, 4.0, 1.0, 1.0, 1.0]
+        kw["callback"](dict(step=0, objective=1.0, gains=gains, wall_s=0.0))
+        knots = [f"{n}[{j}]" for n in names for j in range(3)]
+        return tune_module.TuneResult(
+            scenario, scenario, knots, gains, gains, "miss_rms", "adam", 0, 4, 1, [], None,
+            0.0, 0.0,
+        )  # fmt: skip
+
+    monkeypatch.setattr(tune_module, "tune", fake_tune)
+    monkeypatch.setattr(result_module, "plot_training", lambda *a: None)
+    params = "guidance.los.k1_schedule,guidance.los.k2_schedule"
+    args = ["--params", params, "--set", "guidance.los.schedule_tgo_s=[0,1200,7200]"]
+    assert cli.main(["tune", "deep-impact-los", "--out", str(tmp_path), *args]) == 0
+    out = capsys.readouterr().out
+    assert "k1_schedule[0]=4 k1_schedule[1]=4 k1_schedule[2]=4 k2_schedule[0]=1" in out
+    assert "guidance.los.k2_schedule[2]: 1 -> 1" in out
+
+
 @pytest.mark.parametrize("max_failed,code", [(None, 3), ("0.5", 0)])
 def test_a_tune_whose_tuned_gains_fail_held_out_runs_exits_3(
     max_failed, code, monkeypatch, capsys, tmp_path

@@ -257,16 +257,20 @@ def cmd_report(args) -> int:
 def cmd_tune(args) -> int:
     _device(args)
     from ..scenario import load_scenario
-    from ..tuning import progress_line, tune
+    from ..tuning import progress_line, resolve_gains, tune, with_schedule_starts
     from ..tuning.result import save_interrupted
 
     scenario = load_scenario(args.scenario, overrides=args.set or ())
     names = [n.strip() for n in args.params.split(",") if n.strip()]
     history = []
+    gain_names: list[str] = []  # one per tuned value: a schedule's knots each
 
     def step_done(rec):
+        if not gain_names:  # tune has resolved the same names by its first step
+            gains = resolve_gains(with_schedule_starts(scenario, names), names)
+            gain_names.extend(g.name for g in gains)
         history.append(rec)
-        print(progress_line(rec, names), flush=True)
+        print(progress_line(rec, gain_names), flush=True)
 
     with _out_dir(args.out):
         try:
@@ -304,7 +308,7 @@ def cmd_tune(args) -> int:
         + f", {args.steps} steps of {args.batch} runs, compile "
         f"{result.compile_s:.1f} s, training {result.wall_s:.1f} s"
     )
-    for name, a, b in zip(names, result.initial, result.tuned, strict=True):
+    for name, a, b in zip(result.names, result.initial, result.tuned, strict=True):
         print(f"  {name}: {a:.6g} -> {b:.6g}")
     print(result.table())
     paths = result.save(args.out)
