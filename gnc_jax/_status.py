@@ -6,6 +6,7 @@ A run that is not ``ok`` is counted and flagged in the results and left out of t
 import enum
 
 import jax.numpy as jnp
+import numpy as np
 
 
 class Status(enum.IntEnum):
@@ -27,6 +28,15 @@ class Status(enum.IntEnum):
     @classmethod
     def name_of(cls, code: int) -> str:
         return cls(int(code)).name
+
+
+def shown_run(status) -> tuple[int, str]:
+    """The run a report draws as an example, and its label: the first ``ok`` run of a study's
+    ``status`` column (run 0 when none is, labelled with its status)."""
+    status = np.asarray(status)
+    ok = np.flatnonzero(status == Status.ok)
+    i = int(ok[0]) if ok.size else 0
+    return i, f"run {i}" + ("" if ok.size else f" ({Status.name_of(status[0])})")
 
 
 def all_finite(outcome):

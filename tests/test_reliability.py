@@ -410,3 +410,12 @@ def test_device_batches_are_padded_to_whole_vectors_without_changing_a_run(monke
     assert small.chunk_size == 10
     for name, x in padded.outcomes.items():
         np.testing.assert_allclose(x, small.outcomes[name], rtol=1e-12, atol=0, err_msg=name)
+
+
+def test_a_report_draws_its_first_ok_run_as_the_example():
+    from gnc_jax._status import Status, shown_run
+
+    failed, ok = int(Status.propellant), int(Status.ok)
+    assert shown_run(np.array([failed, failed, ok, ok])) == (2, "run 2")
+    assert shown_run(np.array([ok, failed])) == (0, "run 0")
+    assert shown_run(np.array([failed, int(Status.nan)])) == (0, "run 0 (propellant)")

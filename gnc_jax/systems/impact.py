@@ -82,7 +82,7 @@ IMPACT_BUDGET_METRICS = {
     "miss_r_m": lambda o: o["miss_r_m"],
     "dv_mps": lambda o: o["dv_mps"],
     "firings": lambda o: 1.0 * o["firings"],
-    "hit": lambda o: 1.0 * (o["silhouette_ratio"] <= 1.0),
+    "hit": lambda o: 1.0 * (o["silhouette_ratio"] < 1.0),  # as hit_statistics
 }
 """What the error budget of an impact decomposes: the miss, its B-plane components, Δv,
 firings and the hit indicator (whose mean is the hit probability)."""

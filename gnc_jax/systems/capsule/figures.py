@@ -25,7 +25,7 @@ def _chute_scatter(plt, summary, scenario, dr, cr):
             e = ellipse_xy(xy.mean(axis=0), np.cov(xy.T), k)
             ax.plot(e[0], e[1], "k" + style, lw=1, label=f"{k}σ ellipse")
     ax.add_patch(
-        plt.Rectangle((-2.5, -2.5), 5, 5, fill=False, ec="C2", lw=1, label="±2.5 km (issue)")
+        plt.Rectangle((-2.5, -2.5), 5, 5, fill=False, ec="C2", lw=1, label="±2.5 km (requirement)")
     )
     try:
         lo_d, hi_d = (float(x) for x in str(paper["downrange_err_km_3sigma"]).split(".."))

@@ -14,7 +14,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..._numerics import LoopShape
-from ..._status import Status
+from ..._status import Status, shown_run
 from ...guidance.intercept.apn import PNNavigation
 from ...guidance.intercept.base import AbstractInterceptGuidance
 from ...plotting import ellipse_xy, pyplot, saver
@@ -136,11 +136,13 @@ def intercept_figures(summary, runs, scenario, out: pathlib.Path, traces) -> lis
 
     save = saver(plt, out, files)
 
-    # Run 0 of the study, then the three laws of Table 3 error-free from the same scenario.
+    # A run of the study (its first ok run), then the three laws of Table 3 error-free from
+    # the same scenario.
     _, law = InterceptSystem().build(scenario)
-    _, trace = traces["run0"]
+    _, trace = traces["shown"]
+    label = shown_run(runs["status"])[1]
     fig, ax = plt.subplots(figsize=(10, 4.5))
-    _pn_command_panel(ax, trace, law, f"{scenario.name}, run 0: {law.describe()}")
+    _pn_command_panel(ax, trace, law, f"{scenario.name}, {label}: {law.describe()}")
     ax.set_xlabel("mission time (h)")
     save(fig, "command_trace.png")
 
@@ -278,7 +280,8 @@ class InterceptSystem(AbstractSystem):
         cases = {
             t: TraceRequest((0,), _law_case(n0, k), seed=0, single=True) for t, n0, k in _LAW_CASES
         }
-        return {"run0": TraceRequest((0,), single=True), **cases}
+        shown = shown_run(runs["status"])[0]
+        return {"shown": TraceRequest((shown,), single=True), **cases}
 
     def figures(self, summary, runs, scenario, out, traces=None):
         return intercept_figures(summary, runs, scenario, out, traces)

@@ -16,7 +16,7 @@ from typing import Any, ClassVar
 import jax.numpy as jnp
 import numpy as np
 
-from ..._status import Status
+from ..._status import Status, shown_run
 from ...constants import SECONDS_PER_DAY
 from ...guidance.midcourse import AbstractMidcourseGuidance
 from ...plotting import pyplot, saver
@@ -179,11 +179,12 @@ def _dv_per_fix(plt, summary, runs, ok, scenario, sim):
     fix_epochs = t_fix + float(sim.fix_interval_s) * np.arange(per_fix.shape[1])
     fix_days = (t_enc - fix_epochs) / SECONDS_PER_DAY
     width = 0.8 * float(sim.fix_interval_s) / SECONDS_PER_DAY if per_fix.shape[1] > 1 else 5.0
+    shown, label = shown_run(runs["status"])
     fig, ax = plt.subplots(figsize=(10, 4.5))
-    ax.bar(fix_days, per_fix[0], width=width, color="C0", alpha=0.7, label="run 0")
+    ax.bar(fix_days, per_fix[shown], width=width, color="C0", alpha=0.7, label=label)
     if ok.sum() > 1:
         ax.plot(fix_days, per_fix[ok].mean(axis=0), "C3o-", ms=3, label=f"mean, {ok.sum()} runs")
-    if np.any(per_fix[0] > 0):
+    if np.any(per_fix[shown] > 0):
         ax.set_yscale("log")
     ax.invert_xaxis()
     ax.set_xlabel("days to encounter")
