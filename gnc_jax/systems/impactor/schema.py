@@ -167,6 +167,9 @@ def _check_propellant(cfg: dict, tof: float) -> None:
     _check_dv_budget(cfg, tof)
 
 
+_TOF_FROM = "of approach.position_km at approach.velocity_kmps"
+
+
 def _check_timeline(cfg: dict, tof: float) -> None:
     """The control step divides the image interval, the cut-off and retarget times fall
     within the time of flight ``tof`` (s), at least ``MIN_IMAGES`` images come before the
@@ -181,12 +184,12 @@ def _check_timeline(cfg: dict, tof: float) -> None:
     if not g["cutoff_tgo_s"] < tof:
         raise ScenarioError(
             f"guidance.cutoff_tgo_s: {g['cutoff_tgo_s']:g} s; allowed: [0, {tof:g}) s (less "
-            "than the time of flight)"
+            f"than the time of flight {_TOF_FROM})"
         )
     if not g["retarget_tgo_s"] < tof:
         raise ScenarioError(
             f"guidance.retarget_tgo_s: {g['retarget_tgo_s']:g} s; allowed: [0, {tof:g}) s "
-            "(less than the time of flight)"
+            f"(less than the time of flight {_TOF_FROM})"
         )
     images = (tof - g["cutoff_tgo_s"]) / cam["image_interval_s"]
     if images < MIN_IMAGES:
