@@ -7,35 +7,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from entry_problem import design_problem
 
 import gnc_jax as gj
 from gnc_jax import cli
 from gnc_jax._status import Status
-from gnc_jax.dynamics.entry import entry_state_from_conditions
 from gnc_jax.guidance.entry import cache, design, nominal, reach
-from gnc_jax.guidance.entry.base import EntryModel
-from gnc_jax.systems.capsule import simulation as capsule_sim
-from gnc_jax.systems.capsule.params import capsule_params
 
 
 @pytest.fixture(scope="module")
 def paper():
     return gj.load_scenario("lunar-skip-entry")
-
-
-def _problem(scenario) -> nominal.NominalProblem:
-    """The design problem of a scenario, built the way the capsule system builds it."""
-    cfg = scenario.config
-    p = capsule_params(cfg)
-    earth, vehicle, atmosphere, entry = capsule_sim.nominal_models(p)
-    return nominal.NominalProblem(
-        model=EntryModel(vehicle, earth, atmosphere),
-        entry=entry_state_from_conditions(entry, earth),
-        target_fixed=capsule_sim.target_direction(p, earth, entry),
-        kepler_load_g=jnp.asarray(cfg["guidance"]["skip_entry"]["kepler_load_g"]),
-        chute_altitude_m=p.entry.chute_altitude_m,
-        v_end_mps=jnp.asarray(p.reference.v_end_mps),
-    )
 
 
 def _one_line(e) -> str:
@@ -107,7 +89,10 @@ def test_unreachable_range_is_refused_before_the_design_with_the_reachable_inter
     # a brute-force grid of the design's banks (0.5 deg first entry) lands inside the quoted
     # interval and never near the refused range
     landed = _landed_ranges_km(
-        _problem(scenario), 14000.0, _design_banks_deg(0.5), np.degrees(reach.profile_bank_span())
+        design_problem(scenario),
+        14000.0,
+        _design_banks_deg(0.5),
+        np.degrees(reach.profile_bank_span()),
     )
     landed = landed[np.isfinite(landed)]
     assert landed.size > 0
@@ -132,19 +117,25 @@ def test_uncaptured_entry_angle_is_refused_before_the_design_with_the_corridor(
     shallow, steep = (float(x) for x in text.split("allowed: ")[1].split(" deg")[0].split(" .. "))
     assert steep < shallow < -4.5
     landed = _landed_ranges_km(
-        _problem(scenario), 8000.0, _design_banks_deg(2.0), np.degrees(reach.profile_bank_span())
+        design_problem(scenario),
+        8000.0,
+        _design_banks_deg(2.0),
+        np.degrees(reach.profile_bank_span()),
     )
     assert not np.isfinite(landed).any()  # brute force: nothing skips and lands
     # and the shallow end of the quoted corridor does
     inside = paper.with_overrides([f"entry.fpa_deg={shallow}"])
     landed = _landed_ranges_km(
-        _problem(inside), 8000.0, _design_banks_deg(2.0), np.degrees(reach.profile_bank_span())
+        design_problem(inside),
+        8000.0,
+        _design_banks_deg(2.0),
+        np.degrees(reach.profile_bank_span()),
     )
     assert np.isfinite(landed).any()
 
 
 def test_a_design_that_misses_the_target_is_refused(paper):
-    problem = _problem(paper)
+    problem = design_problem(paper)
     # a design whose first-entry bank is not the root: its nominal lands far from the target
     wrong = design.DesignResult(math.radians(80.0), 1.0472, 1.0472, 7300.0, [])
     flight = nominal.fly_nominal(
@@ -163,7 +154,7 @@ def test_the_fine_first_guess_at_the_overshoot_boundary_brackets_a_falling_root(
     sc = gj.load_scenario(
         "lunar-skip-entry", overrides=["entry.fpa_deg=-5.3", "entry.range_km=6000"]
     )
-    problem = _problem(sc)
+    problem = design_problem(sc)
     guess = design.fine_first_entry_guess(problem)
     assert guess is not None and 118.0 < math.degrees(guess) < 118.5
     a = nominal.PROFILE_INIT_RAD[0]
@@ -182,7 +173,7 @@ def test_the_reach_check_looks_again_on_a_fine_grid_at_the_overshoot_boundary(mo
     sc = gj.load_scenario(
         "lunar-skip-entry", overrides=["entry.fpa_deg=-5.3", "entry.range_km=6000"]
     )
-    problem = _problem(sc)
+    problem = design_problem(sc)
     entry, vehicle = sc.config["entry"], sc.config["vehicle"]
     monkeypatch.setattr(reach, "SIGMA_1_STEP_RAD", math.radians(7.0))
     coarse = reach.candidate_banks()
