@@ -63,18 +63,26 @@ def _design_banks_deg(step_deg):
     return np.arange(lo, hi + 0.01, step_deg)
 
 
-def _landed_ranges_km(problem, range_km, sigma_1_deg, sigma_2_deg):
-    """Brute force: chute range (km, along the entry -> target track) of every nominal on a
-    grid of constant first- and second-entry banks that skips and lands (NaN otherwise)."""
-
-    @jax.jit
+@jax.jit
+def _landed_on_grid(problem, range_km, s1, s2):
     def fly(s1, s2):
         f = nominal.fly_nominal(problem, s1, s2, s2, nominal.V_SWITCH_INIT_MPS)
         skipped = (f.phase == 2) & (f.t_switch < f.t_chute) & f.done
         return jnp.where(skipped, range_km + nominal.range_error_m(problem, f) / 1e3, jnp.nan)
 
+    return jax.vmap(fly)(s1, s2)
+
+
+def _landed_ranges_km(problem, range_km, sigma_1_deg, sigma_2_deg):
+    """Brute force: chute range (km, along the entry -> target track) of every nominal on a
+    grid of constant first- and second-entry banks that skips and lands (NaN otherwise). The
+    problem is an argument of the compiled grid: another problem on a grid of the same size
+    flies on the same program."""
     s1, s2 = np.meshgrid(np.radians(sigma_1_deg), np.radians(sigma_2_deg), indexing="ij")
-    return np.asarray(jax.vmap(fly)(jnp.asarray(s1.ravel()), jnp.asarray(s2.ravel())))
+    range_km = jnp.asarray(range_km, dtype=jnp.float64)
+    return np.asarray(
+        _landed_on_grid(problem, range_km, jnp.asarray(s1.ravel()), jnp.asarray(s2.ravel()))
+    )
 
 
 def test_unreachable_range_is_refused_before_the_design_with_the_reachable_interval(
@@ -102,17 +110,35 @@ def test_unreachable_range_is_refused_before_the_design_with_the_reachable_inter
 
 
 def test_uncaptured_entry_angle_is_refused_before_the_design_with_the_corridor(
-    paper, no_design, tmp_path
+    paper, no_design, tmp_path, monkeypatch, capsys
 ):
+    # The reach check's refusal is computed once: the command line's check, asked about the
+    # same entry and vehicle sections, raises the refusal the API's check raised.
+    real, refusals = cache.require_reachable, []
+
+    def computed_once(problem, entry, vehicle, guess=None):
+        for asked, refusal in refusals:
+            if asked == (entry, vehicle, guess):
+                raise refusal
+        try:
+            return real(problem, entry, vehicle, guess)
+        except gj.ScenarioError as refusal:
+            refusals.append(((entry, vehicle, guess), refusal))
+            raise
+
+    monkeypatch.setattr(cache, "require_reachable", computed_once)
     scenario = paper.with_overrides(["entry.fpa_deg=-4.5"])
     out = tmp_path / "study"
     with pytest.raises(gj.ScenarioError) as e:
         gj.run_study(scenario, runs=2, out=out)
     assert not out.exists()  # refused before the study directory is written: none to resume
+    text = _one_line(e)
+    capsys.readouterr()
     argv = ["run", "lunar-skip-entry", "--runs", "2", "--out", str(out)]
     assert cli.main([*argv, "--set", "entry.fpa_deg=-4.5"]) == cli.EXIT_REFUSED
+    assert capsys.readouterr().err.splitlines()[-1] == f"gnc-jax: error: {text}"
+    assert len(refusals) == 1  # the command line asked about the same sections
     assert not out.exists()  # nor the directory the command created for it
-    text = _one_line(e)
     assert text.startswith("entry.fpa_deg: -4.5 deg; the nominal flight skips out")
     shallow, steep = (float(x) for x in text.split("allowed: ")[1].split(" deg")[0].split(" .. "))
     assert steep < shallow < -4.5
