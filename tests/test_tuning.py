@@ -5,6 +5,9 @@ whole tuner (gradients, the optimiser, the evaluation, the files) at CI cost. Ea
 with something independent: central differences of the objective computed by a per-run loop
 over scenarios rebuilt from overrides, a second run of the tuner, the run-index sets, a fresh
 ``gnc-jax run`` of the written file.
+
+The tunings share their shapes (batches of 8 runs; training checks and held-out sets of 24, or
+12 for the weighted objective), so each of the tuner's programs compiles once in this module.
 """
 
 import json
@@ -82,7 +85,7 @@ def test_objective_gradient_matches_central_differences_of_a_per_run_loop(gradie
 
 
 def test_identical_seeds_give_identical_tuned_gains_and_other_seeds_do_not():
-    kw = dict(batch=8, steps=4, heldout_runs=0, learning_rate=0.2, check_runs=8)
+    kw = dict(batch=8, steps=4, heldout_runs=0, learning_rate=0.2, check_runs=24)
     a = tune(toy(), "guidance.pn.n", "miss_rms", seed=5, **kw)
     b = tune(toy(), "guidance.pn.n", "miss_rms", seed=5, **kw)
     c = tune(toy(), "guidance.pn.n", "miss_rms", seed=6, **kw)
@@ -125,10 +128,10 @@ def test_training_and_heldout_runs_never_overlap(monkeypatch):
     for module in (tune_module.optimisers, tune_module.evaluation):
         monkeypatch.setattr(module, "heldout_indices", spy("heldout", heldout_indices))
     monkeypatch.setattr(tune_module.optimisers, "train_indices", spy("train", train_indices))
-    result = tune(toy(), "guidance.pn.n", "miss_rms", batch=4, steps=3, heldout_runs=10)
-    assert seen["train"] == set(range(12))
-    assert seen["heldout"] == set(range(HELDOUT_OFFSET, HELDOUT_OFFSET + 10))
-    assert result.heldout["paired_runs"] == 10
+    result = tune(toy(), "guidance.pn.n", "miss_rms", batch=8, steps=3, heldout_runs=24)
+    assert seen["train"] == set(range(24))
+    assert seen["heldout"] == set(range(HELDOUT_OFFSET, HELDOUT_OFFSET + 24))
+    assert result.heldout["paired_runs"] == 24
 
 
 def test_a_non_finite_gradient_is_taken_as_zero_and_flagged(monkeypatch):
@@ -148,7 +151,7 @@ def test_a_non_finite_gradient_is_taken_as_zero_and_flagged(monkeypatch):
         return step, compile_s
 
     monkeypatch.setattr(tune_module.TuningProblem, "compiled", poisoned)
-    result = tune(toy(), "guidance.pn.n", "miss_rms", batch=4, steps=2, heldout_runs=0,
+    result = tune(toy(), "guidance.pn.n", "miss_rms", batch=8, steps=2, heldout_runs=0,
                   check_runs=0)  # fmt: skip
     assert [rec.get("nonfinite_gradient") for rec in result.history] == [1, 1]
     assert result.tuned == result.initial  # the one gain never moved
@@ -157,7 +160,15 @@ def test_a_non_finite_gradient_is_taken_as_zero_and_flagged(monkeypatch):
 
 
 def test_heldout_table_is_the_hard_paired_evaluation():
-    result = tune(toy(), "guidance.pn.n", "miss_rms+0.5*dv_mean", batch=8, steps=3, heldout_runs=12)
+    result = tune(
+        toy(),
+        "guidance.pn.n",
+        "miss_rms+0.5*dv_mean",
+        batch=8,
+        steps=3,
+        heldout_runs=12,
+        check_runs=12,
+    )
     rows = {r["metric"]: r for r in result.heldout["rows"]}
     for side, gains in (("initial", result.initial), ("tuned", result.tuned)):
         # the same held-out runs, flown one at a time by the scenario with that gain
@@ -228,14 +239,14 @@ def test_gradient_free_baseline_spends_the_same_runs():
 
 def test_the_result_is_the_checked_point_with_the_lowest_hard_training_objective():
     r = tune(toy(), "guidance.pn.n", "miss_rms", batch=8, steps=4, heldout_runs=0, check_every=1,
-             check_runs=16, learning_rate=0.3)  # fmt: skip
+             check_runs=24, learning_rate=0.3)  # fmt: skip
     checked = [(r.training_check["initial"], r.initial)]
     checked += [(h["check"], h["check_gains"]) for h in r.history]
     assert len(checked) == 5
     assert r.tuned == min(checked, key=lambda c: c[0])[1]
-    # each check is the hard objective of those gains on training runs 0..15 (per-run loop)
+    # each check is the hard objective of those gains on training runs 0..23 (per-run loop)
     value, gains = checked[2]
-    np.testing.assert_allclose(value, per_run_objective(toy(), gains[0], range(16), 0, 0.0))
+    np.testing.assert_allclose(value, per_run_objective(toy(), gains[0], range(24), 0, 0.0))
 
 
 def test_tuned_toml_round_trips_through_gnc_jax_run(tmp_path):
@@ -247,7 +258,7 @@ def test_tuned_toml_round_trips_through_gnc_jax_run(tmp_path):
     out = tmp_path / "tuned"
     sets = [x for k, v in FAST.items() for x in ("--set", f"{k}={v}")]
     argv = [sys.executable, "-m", "gnc_jax", "tune", TOY, "--params", "guidance.pn.n"]
-    argv += ["--objective", "miss_rms", "--batch", "8", "--steps", "3", "--heldout", "8"]
+    argv += ["--objective", "miss_rms", "--batch", "8", "--steps", "3", "--heldout", "24"]
     done = subprocess.run(
         argv + ["--out", str(out), *sets], env=env, capture_output=True, text=True
     )
@@ -560,7 +571,7 @@ def test_auto_gradient_mode_follows_the_number_of_parameters(monkeypatch):
     assert [optimisers.gradient_mode("auto", p, costs) for p in (1, 2)] == ["forward", "reverse"]
     on_one = [optimisers.gradient_mode("auto", p, costs, 2) for p in (5, 6, 7)]
     assert on_one == ["forward", "forward", "reverse"]
-    kw = dict(batch=6, steps=3, heldout_runs=0, learning_rate=0.2, check_runs=0, seed=2)
+    kw = dict(batch=8, steps=3, heldout_runs=0, learning_rate=0.2, check_runs=0, seed=2)
     fwd = tune(toy(), "guidance.pn.n", "miss_rms", gradient="forward", **kw)
     rev = tune(toy(), "guidance.pn.n", "miss_rms", gradient="reverse", **kw)
     auto = tune(toy(), "guidance.pn.n", "miss_rms", **kw)

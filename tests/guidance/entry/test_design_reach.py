@@ -6,28 +6,10 @@ import re
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from entry_problem import skip_entry_problem
 
 import gnc_jax as gj
-from gnc_jax.dynamics.entry import entry_state_from_conditions
 from gnc_jax.guidance.entry import cache, design_reach, nominal, reach
-from gnc_jax.guidance.entry.base import EntryModel
-from gnc_jax.systems.capsule import simulation as capsule_sim
-from gnc_jax.systems.capsule.params import capsule_params
-
-
-def _problem(overrides) -> tuple[nominal.NominalProblem, dict]:
-    cfg = gj.load_scenario("lunar-skip-entry", overrides=overrides).config
-    p = capsule_params(cfg)
-    earth, vehicle, atmosphere, entry = capsule_sim.nominal_models(p)
-    problem = nominal.NominalProblem(
-        model=EntryModel(vehicle, earth, atmosphere),
-        entry=entry_state_from_conditions(entry, earth),
-        target_fixed=capsule_sim.target_direction(p, earth, entry),
-        kepler_load_g=jnp.asarray(cfg["guidance"]["skip_entry"]["kepler_load_g"]),
-        chute_altitude_m=p.entry.chute_altitude_m,
-        v_end_mps=jnp.asarray(p.reference.v_end_mps),
-    )
-    return problem, cfg
 
 
 def test_a_target_beyond_the_designs_skip_out_is_refused_before_the_design(tmp_path, monkeypatch):
@@ -43,7 +25,7 @@ def test_a_target_beyond_the_designs_skip_out_is_refused_before_the_design(tmp_p
     monkeypatch.setenv("GNC_JAX_CACHE", str(tmp_path))
     monkeypatch.setattr(cache, "design_with_fallback", design_ran)
     monkeypatch.setattr(cache, "design_at_the_edge", design_ran)
-    problem, cfg = _problem(["entry.range_km=12000"])
+    problem, cfg = skip_entry_problem(["entry.range_km=12000"])
     with pytest.raises(gj.ScenarioError) as e:
         cache.reference_for(problem, {"entry": cfg["entry"], "vehicle": cfg["vehicle"]})
     text = str(e.value)

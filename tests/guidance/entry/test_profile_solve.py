@@ -7,13 +7,10 @@ import re
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from entry_problem import skip_entry_problem
 
 import gnc_jax as gj
-from gnc_jax.dynamics.entry import entry_state_from_conditions
 from gnc_jax.guidance.entry import design, nominal, profile_solve, reach
-from gnc_jax.guidance.entry.base import EntryModel
-from gnc_jax.systems.capsule import simulation as capsule_sim
-from gnc_jax.systems.capsule.params import capsule_params
 
 
 def _brute_force_row(err, fate):
@@ -73,25 +70,10 @@ def _spans_km(text: str) -> list[tuple[float, float]]:
     return [(float(a), float(b)) for a, b in re.findall(r"(\d+) \.\. (\d+)", reach)]
 
 
-def _problem(overrides) -> tuple[nominal.NominalProblem, dict]:
-    cfg = gj.load_scenario("lunar-skip-entry", overrides=overrides).config
-    p = capsule_params(cfg)
-    earth, vehicle, atmosphere, entry = capsule_sim.nominal_models(p)
-    problem = nominal.NominalProblem(
-        model=EntryModel(vehicle, earth, atmosphere),
-        entry=entry_state_from_conditions(entry, earth),
-        target_fixed=capsule_sim.target_direction(p, earth, entry),
-        kepler_load_g=jnp.asarray(cfg["guidance"]["skip_entry"]["kepler_load_g"]),
-        chute_altitude_m=p.entry.chute_altitude_m,
-        v_end_mps=jnp.asarray(p.reference.v_end_mps),
-    )
-    return problem, cfg
-
-
 @pytest.fixture(scope="module")
 def boundary():
     """The packaged capsule at -5.3 deg (the overshoot boundary), 4000 km."""
-    return _problem(["entry.fpa_deg=-5.3", "entry.range_km=4000"])
+    return skip_entry_problem(["entry.fpa_deg=-5.3", "entry.range_km=4000"])
 
 
 def test_the_profile_design_puts_the_chute_on_a_target_no_first_entry_bank_reaches(boundary):
@@ -129,7 +111,7 @@ def test_the_profile_design_puts_the_chute_on_a_target_no_first_entry_bank_reach
 def test_a_target_beyond_every_skip_is_refused_with_the_reachable_interval(boundary):
     problem, cfg = boundary
     far = dict(cfg["entry"], range_km=15000.0)
-    problem = _problem(["entry.fpa_deg=-5.3", "entry.range_km=15000"])[0]
+    problem = skip_entry_problem(["entry.fpa_deg=-5.3", "entry.range_km=15000"])[0]
     with pytest.raises(gj.ScenarioError) as e:
         design.design_by_profile(problem, far, cfg["vehicle"])
     text = str(e.value)
@@ -139,7 +121,7 @@ def test_a_target_beyond_every_skip_is_refused_with_the_reachable_interval(bound
     assert any(lo < 4000.0 < hi for lo, hi in spans) and spans[-1][1] < 15000.0
     # the packaged capsule at 12000 km: inside the span of the scan's landings (1838 ..
     # 12695 km) but bracketed by no first-entry bank; the stated intervals leave it out
-    problem, cfg = _problem(["entry.range_km=12000"])
+    problem, cfg = skip_entry_problem(["entry.range_km=12000"])
     with pytest.raises(gj.ScenarioError) as e:
         design.design_by_profile(problem, cfg["entry"], cfg["vehicle"])
     spans = _spans_km(str(e.value))
@@ -150,7 +132,7 @@ def test_a_target_beyond_the_designs_banks_is_designed_at_the_edge_of_the_footpr
     """The packaged capsule at -7.1 deg reaches 10,000 km only by a lofted skip near full lift
     up (its constant-bank footprint ends at 10,083 km): the design's own first-entry banks
     refuse it, the edge design puts the chute on it with a bank below them."""
-    problem, cfg = _problem(["entry.fpa_deg=-7.1", "entry.range_km=10000"])
+    problem, cfg = skip_entry_problem(["entry.fpa_deg=-7.1", "entry.range_km=10000"])
     with pytest.raises(gj.ScenarioError) as e:
         reach.require_reachable(problem, cfg["entry"], cfg["vehicle"])
     assert str(e.value).startswith("entry.range_km: 10000 km; allowed:")
@@ -162,7 +144,7 @@ def test_a_target_beyond_the_designs_banks_is_designed_at_the_edge_of_the_footpr
     assert abs(float(nominal.range_error_m(problem, flight))) < design.DESIGN_MISS_LIMIT_M
     assert "designed at the edge of the footprint" in capsys.readouterr().err
     # beyond the footprint too: refused, the edge design's reach added to the refusal
-    far = _problem(["entry.fpa_deg=-7.1", "entry.range_km=12000"])[0]
+    far = skip_entry_problem(["entry.fpa_deg=-7.1", "entry.range_km=12000"])[0]
     with pytest.raises(gj.ScenarioError) as e2:
         design.design_at_the_edge(
             far, dict(cfg["entry"], range_km=12000.0), cfg["vehicle"], e.value

@@ -7,35 +7,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from entry_problem import design_problem
 
 import gnc_jax as gj
 from gnc_jax import cli
 from gnc_jax._status import Status
-from gnc_jax.dynamics.entry import entry_state_from_conditions
 from gnc_jax.guidance.entry import cache, design, nominal, reach
-from gnc_jax.guidance.entry.base import EntryModel
-from gnc_jax.systems.capsule import simulation as capsule_sim
-from gnc_jax.systems.capsule.params import capsule_params
 
 
 @pytest.fixture(scope="module")
 def paper():
     return gj.load_scenario("lunar-skip-entry")
-
-
-def _problem(scenario) -> nominal.NominalProblem:
-    """The design problem of a scenario, built the way the capsule system builds it."""
-    cfg = scenario.config
-    p = capsule_params(cfg)
-    earth, vehicle, atmosphere, entry = capsule_sim.nominal_models(p)
-    return nominal.NominalProblem(
-        model=EntryModel(vehicle, earth, atmosphere),
-        entry=entry_state_from_conditions(entry, earth),
-        target_fixed=capsule_sim.target_direction(p, earth, entry),
-        kepler_load_g=jnp.asarray(cfg["guidance"]["skip_entry"]["kepler_load_g"]),
-        chute_altitude_m=p.entry.chute_altitude_m,
-        v_end_mps=jnp.asarray(p.reference.v_end_mps),
-    )
 
 
 def _one_line(e) -> str:
@@ -81,18 +63,26 @@ def _design_banks_deg(step_deg):
     return np.arange(lo, hi + 0.01, step_deg)
 
 
-def _landed_ranges_km(problem, range_km, sigma_1_deg, sigma_2_deg):
-    """Brute force: chute range (km, along the entry -> target track) of every nominal on a
-    grid of constant first- and second-entry banks that skips and lands (NaN otherwise)."""
-
-    @jax.jit
+@jax.jit
+def _landed_on_grid(problem, range_km, s1, s2):
     def fly(s1, s2):
         f = nominal.fly_nominal(problem, s1, s2, s2, nominal.V_SWITCH_INIT_MPS)
         skipped = (f.phase == 2) & (f.t_switch < f.t_chute) & f.done
         return jnp.where(skipped, range_km + nominal.range_error_m(problem, f) / 1e3, jnp.nan)
 
+    return jax.vmap(fly)(s1, s2)
+
+
+def _landed_ranges_km(problem, range_km, sigma_1_deg, sigma_2_deg):
+    """Brute force: chute range (km, along the entry -> target track) of every nominal on a
+    grid of constant first- and second-entry banks that skips and lands (NaN otherwise). The
+    problem is an argument of the compiled grid: another problem on a grid of the same size
+    flies on the same program."""
     s1, s2 = np.meshgrid(np.radians(sigma_1_deg), np.radians(sigma_2_deg), indexing="ij")
-    return np.asarray(jax.vmap(fly)(jnp.asarray(s1.ravel()), jnp.asarray(s2.ravel())))
+    range_km = jnp.asarray(range_km, dtype=jnp.float64)
+    return np.asarray(
+        _landed_on_grid(problem, range_km, jnp.asarray(s1.ravel()), jnp.asarray(s2.ravel()))
+    )
 
 
 def test_unreachable_range_is_refused_before_the_design_with_the_reachable_interval(
@@ -107,7 +97,10 @@ def test_unreachable_range_is_refused_before_the_design_with_the_reachable_inter
     # a brute-force grid of the design's banks (0.5 deg first entry) lands inside the quoted
     # interval and never near the refused range
     landed = _landed_ranges_km(
-        _problem(scenario), 14000.0, _design_banks_deg(0.5), np.degrees(reach.profile_bank_span())
+        design_problem(scenario),
+        14000.0,
+        _design_banks_deg(0.5),
+        np.degrees(reach.profile_bank_span()),
     )
     landed = landed[np.isfinite(landed)]
     assert landed.size > 0
@@ -117,34 +110,58 @@ def test_unreachable_range_is_refused_before_the_design_with_the_reachable_inter
 
 
 def test_uncaptured_entry_angle_is_refused_before_the_design_with_the_corridor(
-    paper, no_design, tmp_path
+    paper, no_design, tmp_path, monkeypatch, capsys
 ):
+    # The reach check's refusal is computed once: the command line's check, asked about the
+    # same entry and vehicle sections, raises the refusal the API's check raised.
+    real, refusals = cache.require_reachable, []
+
+    def computed_once(problem, entry, vehicle, guess=None):
+        for asked, refusal in refusals:
+            if asked == (entry, vehicle, guess):
+                raise refusal
+        try:
+            return real(problem, entry, vehicle, guess)
+        except gj.ScenarioError as refusal:
+            refusals.append(((entry, vehicle, guess), refusal))
+            raise
+
+    monkeypatch.setattr(cache, "require_reachable", computed_once)
     scenario = paper.with_overrides(["entry.fpa_deg=-4.5"])
     out = tmp_path / "study"
     with pytest.raises(gj.ScenarioError) as e:
         gj.run_study(scenario, runs=2, out=out)
     assert not out.exists()  # refused before the study directory is written: none to resume
+    text = _one_line(e)
+    capsys.readouterr()
     argv = ["run", "lunar-skip-entry", "--runs", "2", "--out", str(out)]
     assert cli.main([*argv, "--set", "entry.fpa_deg=-4.5"]) == cli.EXIT_REFUSED
+    assert capsys.readouterr().err.splitlines()[-1] == f"gnc-jax: error: {text}"
+    assert len(refusals) == 1  # the command line asked about the same sections
     assert not out.exists()  # nor the directory the command created for it
-    text = _one_line(e)
     assert text.startswith("entry.fpa_deg: -4.5 deg; the nominal flight skips out")
     shallow, steep = (float(x) for x in text.split("allowed: ")[1].split(" deg")[0].split(" .. "))
     assert steep < shallow < -4.5
     landed = _landed_ranges_km(
-        _problem(scenario), 8000.0, _design_banks_deg(2.0), np.degrees(reach.profile_bank_span())
+        design_problem(scenario),
+        8000.0,
+        _design_banks_deg(2.0),
+        np.degrees(reach.profile_bank_span()),
     )
     assert not np.isfinite(landed).any()  # brute force: nothing skips and lands
     # and the shallow end of the quoted corridor does
     inside = paper.with_overrides([f"entry.fpa_deg={shallow}"])
     landed = _landed_ranges_km(
-        _problem(inside), 8000.0, _design_banks_deg(2.0), np.degrees(reach.profile_bank_span())
+        design_problem(inside),
+        8000.0,
+        _design_banks_deg(2.0),
+        np.degrees(reach.profile_bank_span()),
     )
     assert np.isfinite(landed).any()
 
 
 def test_a_design_that_misses_the_target_is_refused(paper):
-    problem = _problem(paper)
+    problem = design_problem(paper)
     # a design whose first-entry bank is not the root: its nominal lands far from the target
     wrong = design.DesignResult(math.radians(80.0), 1.0472, 1.0472, 7300.0, [])
     flight = nominal.fly_nominal(
@@ -163,7 +180,7 @@ def test_the_fine_first_guess_at_the_overshoot_boundary_brackets_a_falling_root(
     sc = gj.load_scenario(
         "lunar-skip-entry", overrides=["entry.fpa_deg=-5.3", "entry.range_km=6000"]
     )
-    problem = _problem(sc)
+    problem = design_problem(sc)
     guess = design.fine_first_entry_guess(problem)
     assert guess is not None and 118.0 < math.degrees(guess) < 118.5
     a = nominal.PROFILE_INIT_RAD[0]
@@ -182,7 +199,7 @@ def test_the_reach_check_looks_again_on_a_fine_grid_at_the_overshoot_boundary(mo
     sc = gj.load_scenario(
         "lunar-skip-entry", overrides=["entry.fpa_deg=-5.3", "entry.range_km=6000"]
     )
-    problem = _problem(sc)
+    problem = design_problem(sc)
     entry, vehicle = sc.config["entry"], sc.config["vehicle"]
     monkeypatch.setattr(reach, "SIGMA_1_STEP_RAD", math.radians(7.0))
     coarse = reach.candidate_banks()
