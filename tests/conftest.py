@@ -48,7 +48,14 @@ def pytest_configure(config):
         path = tempfile.mkdtemp(prefix="gnc-jax-tests-xla-")
         os.environ["JAX_COMPILATION_CACHE_DIR"] = path
         config._gnc_jax_xla_cache = path
+    # Programs that compile in 0.1 s or more are kept (JAX keeps those of 1 s or more by
+    # default): the tests' many small programs are compiled once for both workers too.
+    os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.1")
     jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
+    jax.config.update(
+        "jax_persistent_cache_min_compile_time_secs",
+        float(os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"]),
+    )
 
 
 def pytest_unconfigure(config):
