@@ -273,3 +273,20 @@ def test_cli_run_and_report_write_the_figures(tmp_path, capsys):
     ):
         png = out / name
         assert png.is_file() and png.read_bytes()[:4] == b"\x89PNG" and png.stat().st_size > 10_000
+
+
+def test_later_correction_statistics_of_runs_that_made_none_are_none():
+    """Statistics of the corrections after the first fix's are of those corrections: with none
+    (one fix, or every later fix within its threshold) they are undefined, not 0."""
+    n = 3
+    keys = ("b_err_m", "tof_err_s", "b0_err_m", "tof0_err_s", "dv_mps", "goal_met",
+            "b_err_r_m", "b_err_t_m", "b0_err_r_m", "b0_err_t_m", "dv_first_mps", "dv_ref_mps",
+            "dv_increase_pct", "iterations", "ground_calls")  # fmt: skip
+    o = {k: np.ones(n) for k in keys} | {"corrections": np.ones(n, int)}
+    ok = np.ones(n, bool)
+    for per_fix in (np.ones((n, 1)), np.c_[np.ones(n), np.zeros((n, 2))]):
+        s = midcourse_system._midcourse_statistics(o | {"dv_per_fix_mps": per_fix}, ok)
+        assert s["later_dv_max_mps"] is None and s["later_dv_below_0p2_pct"] is None
+    per_fix = np.c_[np.ones(n), [0.1, 0.3, 0.0]]
+    s = midcourse_system._midcourse_statistics(o | {"dv_per_fix_mps": per_fix}, ok)
+    assert (s["later_dv_max_mps"], s["later_dv_below_0p2_pct"]) == (0.3, 50.0)
