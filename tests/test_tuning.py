@@ -547,13 +547,45 @@ def test_a_batch_without_an_ok_run_is_nan_and_never_the_selected_point(monkeypat
     for t in (None, 0.05):
         assert np.isnan(float(objective.value(out, np.zeros(4), t)))
     assert all(np.isnan(v) for v in objective.term_values(out, np.zeros(4)).values())
-    monkeypatch.setattr(tuner, "_hard_objective", lambda *a: float("nan"))  # the start: no ok run
+    monkeypatch.setattr(tuner, "_hard_scored", lambda *a: (float("nan"), 4))  # the start: no ok run
     history = [
-        dict(step=0, check=float("nan"), check_gains=[9.0]),
-        dict(step=1, check=5.0, check_gains=[2.0]),
+        dict(step=0, check=float("nan"), check_failed=4, check_gains=[9.0]),
+        dict(step=1, check=5.0, check_failed=0, check_gains=[2.0]),
     ]
     check, gains = tuner._training_check(None, [4.0], np.arange(4), history)
     assert gains == [2.0] and check["selected_step"] == 1
+
+
+def test_a_gain_that_fails_more_runs_never_ranks_better(monkeypatch):
+    """An objective over the ok runs falls when a gain turns the worst runs into failures: the
+    training check and the gradient-free tuners rank fewer failed runs first, then the
+    objective (on the same runs)."""
+    from gnc_jax.tuning import tuner
+    from gnc_jax.tuning.evaluation import lexicographic_scores, ranking_key
+
+    monkeypatch.setattr(tuner, "_hard_scored", lambda *a: (10.0, 0))  # the start
+    history = [
+        dict(step=0, check=5.0, check_failed=2, check_gains=[9.0]),  # lower, but 2 runs failed
+        dict(step=1, check=8.0, check_failed=0, check_gains=[3.0]),
+        dict(step=2, check=9.0, check_failed=0, check_gains=[2.0]),
+    ]
+    check, gains = tuner._training_check(None, [4.0], np.arange(16), history)
+    assert gains == [3.0] and check["selected_step"] == 1 and check["failed"]["tuned"] == 0
+    # a population: its scores order the members as (failed, objective) does, and equal the
+    # objectives where every member fails as many runs
+    rng = np.random.default_rng(3)
+    values = rng.normal(100.0, 30.0, 40)
+    values[[4, 17]] = np.nan  # no ok run
+    failed = rng.integers(0, 3, 40)
+    failed[[4, 17]] = 32
+    scores = lexicographic_scores(values, failed)
+    finite = np.isfinite(values)
+    by_key = sorted(np.flatnonzero(finite), key=lambda i: ranking_key(values[i], failed[i]))
+    assert list(np.argsort(scores[finite], kind="stable")) == [
+        list(np.flatnonzero(finite)).index(i) for i in by_key
+    ]
+    assert np.isnan(scores[~finite]).all()
+    np.testing.assert_array_equal(lexicographic_scores(values, np.full(40, 2)), values)
 
 
 def test_auto_gradient_mode_follows_the_number_of_parameters(monkeypatch):

@@ -13,10 +13,37 @@ from .parametrisation import resolve_gains, with_schedule_starts
 from .problem import TuningProblem, heldout_indices
 
 
-def _hard_objective(problem, gains, indices) -> float:
+def _hard_scored(problem, gains, indices) -> tuple[float, int]:
+    """``(objective, failed runs)`` of the hard logic with ``gains`` on runs ``indices``."""
     idx, valid = problem.padded(indices)
     fn = problem.jitted("hard", lambda: problem.hard)
-    return float(fn(problem.args, jnp.asarray(gains), idx, valid)[0])
+    value, out = fn(problem.args, jnp.asarray(gains), idx, valid)
+    return float(value), int(round(float(problem.failed(out, valid))))
+
+
+def _hard_objective(problem, gains, indices) -> float:
+    return _hard_scored(problem, gains, indices)[0]
+
+
+def ranking_key(value: float, failed: int) -> tuple[int, float]:
+    """The order of gains evaluated on the same runs: fewer failed runs first, then the lower
+    objective (an objective with no ok run, non-finite, last). A gain that turns runs into
+    failures can lower an objective taken over the ``ok`` runs; it never ranks better."""
+    return failed, (value if np.isfinite(value) else np.inf)
+
+
+def lexicographic_scores(values, failed):
+    """Scores of a population on common runs that order it as :func:`ranking_key` does: each
+    member's objective plus, per failed run beyond the population's fewest, the spread of the
+    finite objectives plus one. A population whose members all fail as many runs scores its
+    objectives unchanged; a non-finite objective stays as it is."""
+    values, failed = np.asarray(values, dtype=float), np.asarray(failed, dtype=float)
+    finite = np.isfinite(values)
+    if not finite.any():
+        return values
+    extra = failed - failed[finite].min()
+    spread = float(np.ptp(values[finite])) + 1.0
+    return np.where(finite, values + extra * spread, values)
 
 
 def hard_objectives(scenario, params, objective, gains, runs: int, seed: int = 0) -> list[float]:

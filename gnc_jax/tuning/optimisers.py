@@ -46,7 +46,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from .evaluation import _hard_objective
+from .evaluation import _hard_objective, _hard_scored, lexicographic_scores
 from .problem import TuningProblem, heldout_indices, train_indices
 
 REVERSE_FROM = 10
@@ -160,7 +160,7 @@ def _monitor(problem, rec, theta, s, steps, monitor):
     last = s == steps - 1
     every = monitor["check_every"]
     if monitor["check_runs"] and every and ((s + 1) % every == 0 or last):
-        rec["check"] = _hard_objective(problem, gains, monitor["check_indices"])
+        rec["check"], rec["check_failed"] = _hard_scored(problem, gains, monitor["check_indices"])
         rec["check_gains"] = gains
     every = monitor["eval_every"]
     if every and (s % every == 0 or last):
@@ -174,9 +174,11 @@ def _population(problem):
 
     def build():
         def population_values(args, thetas, idx, valid):
-            return jax.vmap(lambda th: problem.hard(args, problem.param.gains(th), idx, valid)[0])(
-                thetas
-            )
+            def member(th):
+                value, out = problem.hard(args, problem.param.gains(th), idx, valid)
+                return value, problem.failed(out, valid)
+
+            return jax.vmap(member)(thetas)
 
         return population_values
 
@@ -202,8 +204,9 @@ def _run_es(
         eps = rng.standard_normal((population, n))
         t0 = time.perf_counter()
         members = np.concatenate([theta[None], theta + sigma * eps, theta - sigma * eps])
-        values = np.asarray(fn(problem.args, members, idx, valid))
-        plus, minus = values[1 : population + 1], values[population + 1 :]
+        values, failed = (np.asarray(x) for x in fn(problem.args, members, idx, valid))
+        scores = lexicographic_scores(values[1:], failed[1:])
+        plus, minus = scores[:population], scores[population:]
         grad = np.sum((plus - minus)[:, None] * eps, axis=0) / (2.0 * sigma * population)
         rec = _record(problem, s, values[0], theta, None, (s + 1) * per_member * 2 * population, 0)
         theta, state = update(grad, state, theta)
@@ -253,9 +256,10 @@ def _run_cma(
         mean = np.array(es.mean)
         candidates = es.ask()
         members = np.concatenate([mean[None], np.asarray(candidates)])
-        values = np.asarray(fn(problem.args, members, idx, valid))
-        # a failed member (no ok run: a non-finite objective) ranks last
-        es.tell(candidates, [float(v) if np.isfinite(v) else 1e300 for v in values[1:]])
+        values, failed = (np.asarray(x) for x in fn(problem.args, members, idx, valid))
+        # fewer failed runs rank first; a member with no ok run (non-finite) last
+        scores = lexicographic_scores(values[1:], failed[1:])
+        es.tell(candidates, [float(v) if np.isfinite(v) else 1e300 for v in scores])
         rec = _record(problem, s, values[0], mean, None, (s + 1) * per_member * 2 * population, 0)
         wall += time.perf_counter() - t0
         rec["wall_s"] = wall

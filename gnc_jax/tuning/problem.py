@@ -149,6 +149,12 @@ class TuningProblem:
                 finite &= jnp.isfinite(x).reshape(x.shape[0], -1).all(axis=1)
         return jnp.where(ok & finite, valid, 0.0)
 
+    @classmethod
+    def failed(cls, outcomes, valid):
+        """How many of the real runs (``valid`` 1) did not count (:meth:`weights` 0): the
+        failed runs, which the tuners rank before the objective."""
+        return jnp.sum(valid) - jnp.sum(cls.weights(outcomes, valid))
+
     def smooth(self, args, theta, temperature, indices, valid, gradient="forward"):
         """The relaxed objective at ``theta`` on runs ``indices`` (pure in its arguments), to be
         differentiated in ``gradient`` mode (with :meth:`args_for` its ``args``)."""

@@ -27,7 +27,8 @@ class TuneResult:
         training_check: the hard objective on the first ``runs`` training runs of the start
             (``initial``), the last step (``last``) and the result (``tuned``, at
             ``selected_step``; -1: the start): a relaxation that misled the tuner shows there,
-            without looking at the held-out runs (``None`` when ``check_runs=0``).
+            without looking at the held-out runs, and ``failed``: the failed runs of each
+            (``None`` when ``check_runs=0``).
         compile_s, wall_s: compilation and training wall time.
     """
 
@@ -69,6 +70,10 @@ class TuneResult:
                 f"training runs 0..{c['runs'] - 1}, hard logic: start {c['initial']:.5g}, last "
                 f"step {c['last']:.5g}, result ({at}) {c['tuned']:.5g}"
             )
+            failed = c.get("failed", {})
+            if any(failed.values()):
+                lines[-1] += " (failed runs: " + ", ".join(f"{k} {v}" for k, v in failed.items())
+                lines[-1] += ")"
         lines.append(heldout_table(self.heldout) if self.heldout else "(no held-out evaluation)")
         return "\n".join(lines)
 

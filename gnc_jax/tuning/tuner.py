@@ -14,7 +14,7 @@ from ..backend import placement, select
 from ..montecarlo import MAX_HOURS
 from ..scenario import Scenario, ScenarioError, load_scenario
 from .cost import checked_tune_cost
-from .evaluation import _hard_objective, evaluate_heldout
+from .evaluation import _hard_scored, evaluate_heldout, ranking_key
 from .objectives import parse_objective
 from .optimisers import (
     _run_adam,
@@ -232,19 +232,25 @@ def _check_temperature(temperature) -> None:
 
 def _training_check(problem, initial, check_indices, history) -> tuple[dict, list]:
     """``(training_check, tuned gains)``: the result is the checked point (or the start) with
-    the lowest hard objective on the check's training runs, so that a relaxation that drifts
-    late does not decide it."""
-    checked = [(_hard_objective(problem, initial, check_indices), -1, initial)]
-    checked += [(h["check"], h["step"], h["check_gains"]) for h in history if "check" in h]
-    best = min(checked, key=lambda c: c[0] if np.isfinite(c[0]) else inf)  # no ok run: last
+    the fewest failed runs and, among those, the lowest hard objective on the check's training
+    runs (:func:`~.evaluation.ranking_key`), so that a relaxation that drifts late does not
+    decide it, nor a gain that turns runs into failures."""
+    checked = [(*_hard_scored(problem, initial, check_indices), -1, initial)]
+    checked += [
+        (h["check"], h["check_failed"], h["step"], h["check_gains"])
+        for h in history
+        if "check" in h
+    ]
+    best = min(checked, key=lambda c: ranking_key(c[0], c[1]))
     check = dict(
         runs=len(check_indices),
         initial=checked[0][0],
         last=checked[-1][0],
         tuned=best[0],
-        selected_step=best[1],
+        selected_step=best[2],
+        failed=dict(initial=checked[0][1], last=checked[-1][1], tuned=best[1]),
     )
-    return check, list(best[2])
+    return check, list(best[3])
 
 
 def _with_gains(scenario: Scenario, gains, values) -> Scenario:
