@@ -1,4 +1,7 @@
-"""Statistics of study outcomes shared by the systems: binomial proportions.
+"""Statistics of study outcomes shared by the systems: spreads, binomial proportions.
+
+A spread (standard deviation, 3σ interval, central interval) needs two runs: from one ``ok``
+run it is ``None`` (JSON null), not 0, which would read as a study without dispersion.
 
 The Wilson score interval (Wilson 1927) of a proportion k / n at confidence 1 - alpha:
 
@@ -12,6 +15,23 @@ k = n, which is where a hit probability lives.
 
 import math
 from statistics import NormalDist
+
+import numpy as np
+
+MIN_SPREAD_RUNS = 2
+"""Fewest runs a spread is computed from; below it the spread is ``None``."""
+
+
+def std(x) -> float | None:
+    """The standard deviation of ``x`` (population form, as ``np.std``), ``None`` below
+    :data:`MIN_SPREAD_RUNS` values."""
+    x = np.asarray(x)
+    return float(np.std(x)) if x.size >= MIN_SPREAD_RUNS else None
+
+
+def spread(fn, x):
+    """``fn(x)`` (a spread of the values ``x``), ``None`` below :data:`MIN_SPREAD_RUNS`."""
+    return fn(x) if np.asarray(x).size >= MIN_SPREAD_RUNS else None
 
 
 def wilson_interval(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
@@ -29,4 +49,4 @@ def wilson_interval(k: int, n: int, confidence: float = 0.95) -> tuple[float, fl
     return lo, hi
 
 
-__all__ = ["wilson_interval"]
+__all__ = ["MIN_SPREAD_RUNS", "spread", "std", "wilson_interval"]

@@ -27,3 +27,53 @@ def test_wilson_interval_covers_at_its_level():
 def test_wilson_interval_refuses_bad_counts():
     with pytest.raises(ValueError, match="0 <= k <= n"):
         wilson_interval(5, 3)
+
+
+def _outcomes(outcome_type, n, rng):
+    """Every field of a system's outcome as ``n`` distinct values (a per-fix table for the
+    midcourse Δv), integers where the statistics count."""
+    o = {f: rng.uniform(0.5, 2.0, n) for f in outcome_type._fields}
+    counts = "firings ignitions pulses predictions cycle_predictions_max pc_cycles"
+    counts += " corrector_failures reversals corrections goal_met"
+    for f in counts.split():
+        o[f] = rng.integers(1, 4, n)
+    o["status"] = np.zeros(n, dtype=np.int32)
+    o["dv_per_fix_mps"] = rng.uniform(0.0, 1.0, (n, 3))
+    return o
+
+
+@pytest.mark.parametrize("kind", ["impactor", "intercept", "capsule", "midcourse"])
+def test_a_spread_from_one_ok_run_is_none_not_zero(kind, capsys):
+    """One ok run has no spread: every standard deviation and interval of the summary is None
+    (null in summary.json) where 0 would read as a study without dispersion; the central
+    values stay, and from two ok runs the spreads are numpy's."""
+    from gnc_jax.cli.output import _print_summary
+    from gnc_jax.systems import get_system
+    from gnc_jax.systems.capsule.state import CapsuleOutcome
+    from gnc_jax.systems.impactor.state import ImpactorOutcome
+    from gnc_jax.systems.intercept.state import PNOutcome
+    from gnc_jax.systems.midcourse.simulation import MidcourseOutcome
+
+    types = dict(impactor=ImpactorOutcome, intercept=PNOutcome, capsule=CapsuleOutcome,
+                 midcourse=MidcourseOutcome)  # fmt: skip
+    o = _outcomes(types[kind], 5, np.random.default_rng(1))
+    system = get_system(kind)
+    one = system.statistics(o, np.arange(5) == 2)
+    two = system.statistics(o, np.arange(5) >= 3)
+    spreads = [k for k in two if k.endswith(("_std", "_std_m", "_std_mps", "_3sigma"))]
+    spreads += [k for k in two if "central" in k or k == "chute_3sigma_km"]
+    assert spreads, kind
+    for key in spreads:
+        assert one[key] is None, key
+        assert two[key] is not None, key
+    std_keys = [k for k in spreads if "_std" in k and isinstance(two[k], float)]
+    for key in std_keys:
+        assert two[key] > 0.0, key
+    for key in ("miss_rms_m", "dv_mean_mps", "load_peak_g_max", "b_err_km_rms"):
+        if key in two:
+            assert one[key] is not None and np.isfinite(one[key]), key
+    if kind == "capsule":
+        d = o["downrange_err_km"][3:]
+        assert two["downrange_err_km"]["std"] == float(np.std(d))
+    _print_summary({"scenario": kind, "runs": 5, "failed": 4, **one})
+    assert "n/a" in capsys.readouterr().out

@@ -14,6 +14,8 @@ def _print_summary(summary: dict) -> None:
         if key in skip:
             continue
         text = f"{value:.4g}" if isinstance(value, float) else str(value)
+        if value is None:  # a spread from fewer than two ok runs
+            text = "n/a"
         if isinstance(value, list) and value and all(isinstance(v, float) for v in value):
             text = "[" + ", ".join(f"{v:.4g}" for v in value) + "]"
         print(f"  {key:<{width}}  {text}")

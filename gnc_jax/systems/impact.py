@@ -7,7 +7,7 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
-from ..statistics import wilson_interval
+from ..statistics import std, wilson_interval
 
 
 def impact_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
@@ -25,7 +25,7 @@ def impact_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any
         miss_t_mean_m=float(np.mean(o["miss_t_m"][ok])),
         miss_r_mean_m=float(np.mean(o["miss_r_m"][ok])),
         dv_mean_mps=float(np.mean(dv)),
-        dv_std_mps=float(np.std(dv)),
+        dv_std_mps=std(dv),
         dv_max_mps=float(np.max(dv)),
         firings_mean=float(np.mean(firings)),
         firings_max=int(np.max(firings)),

@@ -48,8 +48,8 @@ def _chute_scatter(plt, summary, scenario, dr, cr):
     ax.set_ylabel("downrange error (km, > 0 overshoot)")
     ax.set_title(
         f"{scenario.name}: chute deploy (seed 003 Fig. 6)\n"
-        f"3σ downrange {summary.get('downrange_err_km_3sigma')}, "
-        f"crossrange {summary.get('crossrange_err_km_3sigma')} km"
+        f"3σ downrange {summary.get('downrange_err_km_3sigma') or 'n/a'}, "
+        f"crossrange {summary.get('crossrange_err_km_3sigma') or 'n/a'} km"
     )
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(alpha=0.3)

@@ -18,6 +18,7 @@ import numpy as np
 from ..._status import Status
 from ...guidance.entry.base import AbstractEntryGuidance
 from ...params import from_scenario
+from ...statistics import spread, std
 from ..base import (
     CPU_SOURCE,
     H100_SOURCE,
@@ -41,14 +42,19 @@ FIRST_ENTRY_FRACTION = 0.16  # corrector-active first entry over the flight: (22
 
 
 def _interval(x: np.ndarray) -> dict[str, Any]:
-    m, s = float(np.mean(x)), float(np.std(x))
+    """Mean, spread and range of ``x``; the spread and the 3σ interval ``None`` from one run."""
+    m, s = float(np.mean(x)), std(x)
     return dict(
         mean=m,
         std=s,
         min=float(np.min(x)),
         max=float(np.max(x)),
-        three_sigma=[m - 3 * s, m + 3 * s],
+        three_sigma=None if s is None else [m - 3 * s, m + 3 * s],
     )
+
+
+def _text(interval) -> str | None:
+    return None if interval is None else "{:.2f} .. {:.2f}".format(*interval)
 
 
 def _capsule_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
@@ -57,17 +63,13 @@ def _capsule_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, A
     out: dict[str, Any] = {
         "downrange_err_km": _interval(o["downrange_err_km"][ok]),
         "crossrange_err_km": _interval(o["crossrange_err_km"][ok]),
-        "downrange_err_km_3sigma": "{:.2f} .. {:.2f}".format(
-            *_interval(o["downrange_err_km"][ok])["three_sigma"]
-        ),
-        "crossrange_err_km_3sigma": "{:.2f} .. {:.2f}".format(
-            *_interval(o["crossrange_err_km"][ok])["three_sigma"]
-        ),
+        "downrange_err_km_3sigma": _text(_interval(o["downrange_err_km"][ok])["three_sigma"]),
+        "crossrange_err_km_3sigma": _text(_interval(o["crossrange_err_km"][ok])["three_sigma"]),
         # the empirical interval holding 99.73 % of the runs (what mean +- 3 std means for a
         # Gaussian), which a few heavy-tailed runs do not stretch
         **{
-            f"{name}_central_99_73": "{:.2f} .. {:.2f}".format(
-                *np.percentile(o[name][ok], [0.135, 99.865])
+            f"{name}_central_99_73": _text(
+                spread(lambda x: np.percentile(x, [0.135, 99.865]), o[name][ok])
             )
             for name in ("downrange_err_km", "crossrange_err_km")
         },
@@ -77,10 +79,13 @@ def _capsule_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, A
         },
         # the chute-deploy 3-sigma error: the larger end of the downrange and crossrange
         # mean +- 3 std intervals (what "within +-5 km" bounds)
-        "chute_3sigma_km": max(
-            abs(x)
-            for name in ("downrange_err_km", "crossrange_err_km")
-            for x in _interval(o[name][ok])["three_sigma"]
+        "chute_3sigma_km": spread(
+            lambda _: max(
+                abs(x)
+                for name in ("downrange_err_km", "crossrange_err_km")
+                for x in _interval(o[name][ok])["three_sigma"]
+            ),
+            o["downrange_err_km"][ok],
         ),
         "load_peak_g_max": float(np.max(o["load_peak_g"][ok])),
         "load_peak_g_mean": float(np.mean(o["load_peak_g"][ok])),

@@ -18,6 +18,7 @@ from ..._status import Status, shown_run
 from ...guidance.intercept.apn import PNNavigation
 from ...guidance.intercept.base import AbstractInterceptGuidance
 from ...plotting import ellipse_xy, pyplot, saver
+from ...statistics import std
 from ..base import (
     CPU_SOURCE,
     H100_LAYOUT_SOURCE,
@@ -48,9 +49,9 @@ def _intercept_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str,
     out.update(hit_statistics(o, ok))
     miss = o["miss_m"][ok]
     out.update(
-        miss_std_m=float(np.std(miss)),
-        miss_t_std_m=float(np.std(o["miss_t_m"][ok])),
-        miss_r_std_m=float(np.std(o["miss_r_m"][ok])),
+        miss_std_m=std(miss),
+        miss_t_std_m=std(o["miss_t_m"][ok]),
+        miss_r_std_m=std(o["miss_r_m"][ok]),
         dv_min_mps=float(np.min(o["dv_mps"][ok])),
         ignitions_mean=float(np.mean(o["ignitions"][ok])),
         pulses_mean=float(np.mean(o["pulses"][ok])),

@@ -20,6 +20,7 @@ from ..._status import Status, shown_run
 from ...constants import SECONDS_PER_DAY
 from ...guidance.midcourse import AbstractMidcourseGuidance
 from ...plotting import pyplot, saver
+from ...statistics import std
 from ..base import AbstractSystem, register_system
 from . import build as midcourse_build
 from . import params as midcourse_params
@@ -47,13 +48,13 @@ def _midcourse_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str,
         corrections_mean=float(np.mean(count)),
         goal_met=int(np.sum(o["goal_met"][ok])),
         goal_met_pct=float(100.0 * np.mean(o["goal_met"][ok])),
-        b_err_r_km_std=float(np.std(o["b_err_r_m"][ok] / 1e3)),
-        b_err_t_km_std=float(np.std(o["b_err_t_m"][ok] / 1e3)),
-        tof_err_s_std=float(np.std(o["tof_err_s"][ok])),
+        b_err_r_km_std=std(o["b_err_r_m"][ok] / 1e3),
+        b_err_t_km_std=std(o["b_err_t_m"][ok] / 1e3),
+        tof_err_s_std=std(o["tof_err_s"][ok]),
         b0_err_km_rms=rms(b0),
         b0_err_km_max=float(np.max(b0)),
-        b0_err_r_km_std=float(np.std(o["b0_err_r_m"][ok] / 1e3)),
-        b0_err_t_km_std=float(np.std(o["b0_err_t_m"][ok] / 1e3)),
+        b0_err_r_km_std=std(o["b0_err_r_m"][ok] / 1e3),
+        b0_err_t_km_std=std(o["b0_err_t_m"][ok] / 1e3),
         tof0_err_s_rms=rms(tof0),
         dv_max_mps=float(np.max(dv)),
         dv_first_mean_mps=float(np.mean(o["dv_first_mps"][ok])),
