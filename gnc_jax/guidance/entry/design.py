@@ -7,7 +7,8 @@ deploys on the target), (sigma_a, sigma_b) minimise  J = N_g2 + w_margin * max(|
 |cos sigma_a|, |cos sigma_b|)  with optax Adam: N_g2 is the second-entry load peak (a smooth
 maximum, g) and the cosines measure how close each bank is to full lift up or down (no control
 margin). A design that does not converge is retried once with a fine bracketing step, then
-refused.
+replaced by a design with a constant second-entry bank (the profile design, then the far-bank
+design), then refused.
 """
 
 import math
@@ -21,7 +22,13 @@ import optax
 
 from ...schema import ScenarioError
 from .base import flight_variables
-from .design_reach import intervals_text, range_refusal
+from .design_reach import (
+    FAR_REACH_BANK_RAD,
+    far_bank_design,
+    intervals_text,
+    range_refusal,
+    require_design_reach,
+)
 from .nominal import (
     LANDS_WITHOUT_SKIP,
     NEVER_LANDS,
@@ -157,8 +164,13 @@ def design_with_fallback(problem: NominalProblem, entry: dict, vehicle: dict, **
     fine bracketing step ``SIGMA_1_FINE_STEP_RAD`` from :func:`fine_first_entry_guess` (the
     overshoot boundary, where the banks that skip and land are a window narrower than the
     coarse step); if that fails too, the design that fixes the first-entry bank and meets the
-    range with a constant second-entry bank (:func:`design_by_profile`), refused in turn with
-    the reachable interval. A design that converges at the coarse step is returned as it is."""
+    range with a constant second-entry bank (:func:`design_by_profile`); then the design that
+    meets it with the first-entry bank and the constant second-entry bank
+    ``FAR_REACH_BANK_RAD`` (:func:`~.design_reach.far_bank_design`: the ranges beyond the
+    optimiser's far end and in the profile design's gaps). A target none of them brackets is
+    refused with the ranges they reach (:func:`~.design_reach.require_design_reach`, the check
+    that runs before the design). A design that converges at the coarse step is returned as
+    it is."""
     d = design(problem, **kwargs)
     try:
         require_design(problem, d, entry, vehicle)
@@ -173,7 +185,17 @@ def design_with_fallback(problem: NominalProblem, entry: dict, vehicle: dict, **
             return d
         except ScenarioError:
             pass
-    d = design_by_profile(problem, entry, vehicle)
+    try:
+        d = design_by_profile(problem, entry, vehicle)
+        require_design(problem, d, entry, vehicle)
+        return d
+    except ScenarioError as refusal:
+        far = far_bank_design(problem)
+        if far is None:  # beyond every stage: refused with what they reach
+            require_design_reach(problem, entry, vehicle)
+            raise refusal from None
+    sigma_1, v_switch = far
+    d = DesignResult(sigma_1, FAR_REACH_BANK_RAD, FAR_REACH_BANK_RAD, v_switch, [])
     require_design(problem, d, entry, vehicle)
     return d
 

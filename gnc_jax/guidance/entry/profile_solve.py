@@ -114,6 +114,13 @@ def merged_intervals(spans) -> list[tuple[float, float]]:
     return merged
 
 
+def first_entry_banks(first_entry_bounds=SIGMA_1_BOUNDS_RAD) -> np.ndarray:
+    """The first-entry banks (rad) of the design's scan: a ``FIRST_ENTRY_SCAN_STEP_RAD`` grid
+    over ``first_entry_bounds``, both bounds included."""
+    lo, hi = first_entry_bounds
+    return np.append(np.arange(lo, hi, FIRST_ENTRY_SCAN_STEP_RAD), hi)
+
+
 def first_entry_scan(
     problem: NominalProblem,
     first_entry_bounds=SIGMA_1_BOUNDS_RAD,
@@ -123,8 +130,7 @@ def first_entry_scan(
     ``FIRST_ENTRY_SCAN_STEP_RAD`` grid over ``first_entry_bounds``), the constant
     second-entry banks (rad, ``PROFILE_SCAN_RAD`` or as many over ``profile_bounds``) and the
     chute range errors (m) and fates of the nominal flown with each pair (banks x scan)."""
-    lo, hi = first_entry_bounds
-    banks = np.append(np.arange(lo, hi, FIRST_ENTRY_SCAN_STEP_RAD), hi)
+    banks = first_entry_banks(first_entry_bounds)
     scan = (
         PROFILE_SCAN_RAD
         if tuple(profile_bounds) == PROFILE_BOUNDS_RAD
