@@ -35,15 +35,19 @@ def ranking_key(value: float, failed: int) -> tuple[int, float]:
 def lexicographic_scores(values, failed):
     """Scores of a population on common runs that order it as :func:`ranking_key` does: each
     member's objective plus, per failed run beyond the population's fewest, the spread of the
-    finite objectives plus one. A population whose members all fail as many runs scores its
-    objectives unchanged; a non-finite objective stays as it is."""
+    finite objectives plus one; a member with a non-finite objective (no ok run) scores that
+    spread above the worst finite score. A population whose members all fail as many runs,
+    each with a finite objective, scores its objectives unchanged; one without a finite
+    objective keeps its values. The ES's estimate, which weighs score differences, then takes
+    a failure as a step of the spread rather than losing the generation to a NaN."""
     values, failed = np.asarray(values, dtype=float), np.asarray(failed, dtype=float)
     finite = np.isfinite(values)
     if not finite.any():
         return values
     extra = failed - failed[finite].min()
     spread = float(np.ptp(values[finite])) + 1.0
-    return np.where(finite, values + extra * spread, values)
+    scores = values + extra * spread
+    return np.where(finite, scores, np.max(scores[finite]) + spread)
 
 
 def hard_objectives(scenario, params, objective, gains, runs: int, seed: int = 0) -> list[float]:
