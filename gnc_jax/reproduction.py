@@ -9,7 +9,9 @@ from .systems.base import get_system
 
 
 def comparison_rows(summary: dict) -> list[tuple[str, str, str]]:
-    """``(metric, paper, gnc_jax)`` rows for every published metric of a summary."""
+    """``(metric, paper, gnc_jax)`` rows for every published metric of a summary: "—" where
+    the summary has no such key (no ok run), "n/a" where it holds ``None`` (a statistic its ok
+    runs do not give, such as a spread from one run)."""
     rows = []
     try:
         labels = get_system(summary.get("kind", "")).paper_labels
@@ -18,7 +20,8 @@ def comparison_rows(summary: dict) -> list[tuple[str, str, str]]:
     for key, paper in summary.get("paper", {}).items():
         ours = summary.get(key)
         fmt = lambda v: f"{v:.4g}" if isinstance(v, float) else str(v)
-        rows.append((labels.get(key, key), fmt(paper), "—" if ours is None else fmt(ours)))
+        shown = fmt(ours) if ours is not None else ("n/a" if key in summary else "—")
+        rows.append((labels.get(key, key), fmt(paper), shown))
     return rows
 
 

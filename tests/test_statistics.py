@@ -48,6 +48,7 @@ def test_a_spread_from_one_ok_run_is_none_not_zero(kind, capsys):
     (null in summary.json) where 0 would read as a study without dispersion; the central
     values stay, and from two ok runs the spreads are numpy's."""
     from gnc_jax.cli.output import _print_summary
+    from gnc_jax.reproduction import comparison_rows
     from gnc_jax.systems import get_system
     from gnc_jax.systems.capsule.state import CapsuleOutcome
     from gnc_jax.systems.impactor.state import ImpactorOutcome
@@ -75,5 +76,15 @@ def test_a_spread_from_one_ok_run_is_none_not_zero(kind, capsys):
     if kind == "capsule":
         d = o["downrange_err_km"][3:]
         assert two["downrange_err_km"]["std"] == float(np.std(d))
-    _print_summary({"scenario": kind, "runs": 5, "failed": 4, **one})
-    assert "n/a" in capsys.readouterr().out
+    # the printed summary and the paper comparison say n/a where a spread is None
+    paper = {key: "1.0 .. 2.0" if "3sigma" in key or "central" in key else 1.0 for key in spreads}
+    _print_summary({"scenario": kind, "kind": kind, "runs": 5, "failed": 4, **one, "paper": paper})
+    printed = capsys.readouterr().out
+    assert "n/a" in printed and "paper vs gnc_jax" in printed
+    shown = [ours for _, _, ours in comparison_rows({"kind": kind, **one, "paper": paper})]
+    assert shown == ["n/a"] * len(spreads)
+    # no ok run: no statistic at all, as a study without an ok run has always had
+    assert system.statistics(o, np.zeros(5, bool)) == {}
+    _print_summary({"scenario": kind, "runs": 5, "failed": 5})
+    shown = [ours for _, _, ours in comparison_rows({"kind": kind, "paper": paper})]
+    assert shown == ["—"] * len(spreads)

@@ -584,8 +584,90 @@ def test_a_gain_that_fails_more_runs_never_ranks_better(monkeypatch):
     assert list(np.argsort(scores[finite], kind="stable")) == [
         list(np.flatnonzero(finite)).index(i) for i in by_key
     ]
-    assert np.isnan(scores[~finite]).all()
-    np.testing.assert_array_equal(lexicographic_scores(values, np.full(40, 2)), values)
+    # a member with no ok run ranks after every other, at a finite score the ES can weigh
+    assert np.isfinite(scores).all() and scores[~finite].min() > scores[finite].max()
+    np.testing.assert_array_equal(
+        lexicographic_scores(values[finite], np.full(38, 2)), values[finite]
+    )
+
+
+def _toy_outcomes(status, miss_m):
+    from toy_system import ToyOutcome
+
+    n = len(status)
+    return ToyOutcome(np.asarray(status), np.asarray(miss_m, float), np.ones(n), np.ones(n))
+
+
+def test_the_failed_term_is_the_fraction_of_the_runs_not_ok(monkeypatch):
+    """``failed`` counts the runs of the batch (not its padding) that did not end ``ok`` or
+    have a non-finite outcome, hard and smooth alike; the other terms stay over the ok runs."""
+    scenario = toy()
+    objective = parse_objective("miss_rms+100*failed", scenario)
+    (gain,) = resolve_gains(scenario, ["guidance.pn.n"])
+    problem = tune_module.TuningProblem(scenario, [gain], objective, seed=0)
+    ok, time_out = int(gj.Status.ok), int(gj.Status.time_out)
+    # runs 0..5 real (one time_out, one ok with a NaN miss), 6..7 padding (one time_out)
+    status = [ok, time_out, ok, ok, ok, ok, time_out, ok]
+    miss = [3.0, 900.0, 4.0, np.nan, 1.0, 2.0, 900.0, 3.0]
+    out = _toy_outcomes(status, miss)
+    monkeypatch.setattr(problem, "fn", lambda *a: out)  # the batch's outcomes, by hand
+    idx, valid = problem.padded(np.arange(6), size=8)
+    counted_miss = np.array([3.0, 4.0, 1.0, 2.0])  # the real runs that end ok, finite
+    expected = np.sqrt(np.mean(counted_miss**2)) + 100.0 * 2.0 / 6.0
+    value, _ = problem.hard(problem.args, np.array([3.0]), idx, valid)
+    np.testing.assert_allclose(float(value), expected, rtol=1e-12)
+    theta = jnp.asarray(problem.param.theta([3.0]))
+    smooth = problem.smooth(problem.args, theta, None, idx, valid)
+    np.testing.assert_allclose(float(smooth), expected, rtol=1e-12)
+    # without a runs mask every run is the batch's: 3 of 8 fail
+    terms = objective.term_values(out, np.asarray(problem.weights(out, jnp.ones(8))))
+    assert terms["failed"] == 3.0 / 8.0
+    with pytest.raises(ScenarioError, match="failed takes no argument"):
+        parse_objective("miss_rms+failed(2)", scenario)
+
+
+def test_heldout_table_has_the_failed_fraction_of_every_held_out_run(monkeypatch):
+    """With ``failed`` in the objective the held-out bootstrap resamples every run: the
+    ``failed`` row is each side's failed fraction, the other terms are over the runs ok with
+    both gains, the interval the numpy bootstrap of those per-resample differences."""
+    scenario = toy()
+    objective = parse_objective("miss_rms+100*failed", scenario)
+    (gain,) = resolve_gains(scenario, ["guidance.pn.n"])
+    problem = tune_module.TuningProblem(scenario, [gain], objective, seed=0)
+    rng = np.random.default_rng(5)
+    n = 12
+    ok, failed = int(gj.Status.ok), int(gj.Status.propellant)
+    fail = {1.0: np.isin(np.arange(n), [2, 7]), 2.0: np.isin(np.arange(n), [2, 4, 9])}
+    miss = {g: rng.uniform(1.0, 50.0, n) for g in fail}
+    sides = {g: _toy_outcomes(np.where(fail[g], failed, ok), miss[g]) for g in fail}
+    monkeypatch.setattr(problem, "hard_outcomes", lambda gains, idx: sides[float(gains[0])])
+    resamples = 40  # each an eager evaluation of the objective per row and side
+    bootstrap = lambda *a: paired_interval(*a, resamples=resamples)  # noqa: E731
+    monkeypatch.setattr(tune_module.evaluation, "paired_interval", bootstrap)
+    heldout = tune_module.evaluate_heldout(problem, [1.0], [2.0], runs=n, chunk=n)
+    rows = {r["metric"]: r for r in heldout["rows"]}
+    assert heldout["failed"] == dict(initial=2, tuned=3) and heldout["paired_runs"] == 8
+
+    def by_hand(g, i):
+        both = ~(fail[1.0] | fail[2.0])[i]
+        miss_rms = np.sqrt(np.mean(miss[g][i][both] ** 2))
+        return dict(miss_rms=miss_rms, failed=np.mean(fail[g][i]))
+
+    every = np.arange(n)
+    for side, g in (("initial", 1.0), ("tuned", 2.0)):
+        terms = by_hand(g, every)
+        assert rows["failed"][side] == terms["failed"]
+        np.testing.assert_allclose(rows["miss_rms"][side], terms["miss_rms"], rtol=1e-12)
+        total = terms["miss_rms"] + 100.0 * terms["failed"]
+        np.testing.assert_allclose(rows["objective"][side], total, rtol=1e-12)
+    draws = np.random.default_rng(0)
+    diffs = []
+    for _ in range(resamples):
+        d = draws.integers(0, n, size=n)
+        diffs.append(by_hand(2.0, d)["failed"] - by_hand(1.0, d)["failed"])
+    lo, hi = np.quantile(diffs, [0.025, 0.975])
+    np.testing.assert_allclose([rows["failed"]["ci_low"], rows["failed"]["ci_high"]], [lo, hi])
+    assert "failed" in tune_module.heldout_table(heldout)
 
 
 def test_auto_gradient_mode_follows_the_number_of_parameters(monkeypatch):

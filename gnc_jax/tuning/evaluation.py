@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..scenario import Scenario, load_scenario
-from .objectives import _term_label, parse_objective
+from .objectives import TERMS, _term_label, parse_objective
 from .parametrisation import resolve_gains, with_schedule_starts
 from .problem import TuningProblem, heldout_indices
 
@@ -35,15 +35,19 @@ def ranking_key(value: float, failed: int) -> tuple[int, float]:
 def lexicographic_scores(values, failed):
     """Scores of a population on common runs that order it as :func:`ranking_key` does: each
     member's objective plus, per failed run beyond the population's fewest, the spread of the
-    finite objectives plus one. A population whose members all fail as many runs scores its
-    objectives unchanged; a non-finite objective stays as it is."""
+    finite objectives plus one; a member with a non-finite objective (no ok run) scores that
+    spread above the worst finite score. A population whose members all fail as many runs,
+    each with a finite objective, scores its objectives unchanged; one without a finite
+    objective keeps its values. The ES's estimate, which weighs score differences, then takes
+    a failure as a step of the spread rather than losing the generation to a NaN."""
     values, failed = np.asarray(values, dtype=float), np.asarray(failed, dtype=float)
     finite = np.isfinite(values)
     if not finite.any():
         return values
     extra = failed - failed[finite].min()
     spread = float(np.ptp(values[finite])) + 1.0
-    return np.where(finite, values + extra * spread, values)
+    scores = values + extra * spread
+    return np.where(finite, scores, np.max(scores[finite]) + spread)
 
 
 def hard_objectives(scenario, params, objective, gains, runs: int, seed: int = 0) -> list[float]:
@@ -86,7 +90,9 @@ def evaluate_heldout(
     """Initial vs tuned gains (file units) on the same ``runs`` held-out runs, hard logic.
 
     Rows: the objective and each of its terms, with the paired difference (tuned - initial)
-    and its bootstrap confidence interval over the runs that end ``ok`` with both gains.
+    and its bootstrap confidence interval over the runs that end ``ok`` with both gains. An
+    objective with the ``failed`` term resamples every held-out run instead: that term counts
+    each side's failed runs among them, the others stay over the runs ``ok`` with both.
     """
     indices = heldout_indices(runs)
     chunk = min(chunk or (problem.system.chunk_per_device or 512) * problem.n_dev, runs)
@@ -101,17 +107,21 @@ def evaluate_heldout(
             parts.append(jax.tree_util.tree_map(lambda x, n=n: np.asarray(x)[:n], out))
         sides[side] = jax.tree_util.tree_map(lambda *xs: np.concatenate(xs), *parts)
     w = {s: np.asarray(problem.weights(o, jnp.ones(runs))) for s, o in sides.items()}
-    both = np.flatnonzero((w["initial"] > 0) & (w["tuned"] > 0))
+    paired = (w["initial"] > 0) & (w["tuned"] > 0)
+    both = np.flatnonzero(paired)
     objective = problem.objective
+    over_every_run = any(not TERMS[name].over_ok for _, name, _ in objective.terms)
+    resampled = np.arange(runs) if over_every_run else both
+    counts = paired[resampled].astype(float)  # the runs the terms over ok runs are taken over
 
     def statistic(outcomes, name):
-        paired = jax.tree_util.tree_map(lambda x: x[both], outcomes)
+        drawn = jax.tree_util.tree_map(lambda x: x[resampled], outcomes)
 
         def stat(i):
-            sub = jax.tree_util.tree_map(lambda x: x[i], paired)
+            sub = jax.tree_util.tree_map(lambda x: x[i], drawn)
             if name == "objective":
-                return float(objective.value(sub, jnp.ones(len(i)), None))
-            return objective.term_values(sub, jnp.ones(len(i)))[name]
+                return float(objective.value(sub, jnp.asarray(counts[i]), None))
+            return objective.term_values(sub, jnp.asarray(counts[i]))[name]
 
         return stat
 
@@ -121,9 +131,9 @@ def evaluate_heldout(
     rows = []
     for name in names:
         a, b = statistic(sides["initial"], name), statistic(sides["tuned"], name)
-        every = np.arange(len(both))
+        every = np.arange(len(resampled))
         ini, tun = a(every), b(every)
-        diff, lo, hi = paired_interval(a, b, len(both), confidence)
+        diff, lo, hi = paired_interval(a, b, len(resampled), confidence)
         rows.append(
             dict(
                 metric=name,

@@ -9,8 +9,19 @@ from collections.abc import Callable, Sequence
 import jax
 import jax.numpy as jnp
 
+from .._status import Status
 from ..scenario import Scenario, ScenarioError
 from ..systems.base import AbstractSystem
+
+
+def counted(outcomes):
+    """Per run, whether it counts: status ``ok`` and every float outcome finite (as a study
+    does, a run with a non-finite float outcome is a failed ``nan`` run)."""
+    ok = outcomes.status == Status.ok
+    for x in outcomes:
+        if jnp.issubdtype(x.dtype, jnp.floating):
+            ok &= jnp.isfinite(x).reshape(x.shape[0], -1).all(axis=1)
+    return ok
 
 
 def _wmean(x, w):
@@ -59,15 +70,25 @@ def _peak_load(out, w, limit, t):
     return _wmean(width * jax.nn.softplus(excess / width), w)
 
 
+def _failed(out, runs, arg, t):
+    """The fraction of the runs (``runs`` 1, padding 0) that did not count (:func:`counted`),
+    hard and smooth alike: a count has no relaxation, and no gradient."""
+    failed = jnp.sum(jnp.where(counted(out), 0.0, runs))
+    return failed / jnp.maximum(jnp.sum(runs), 1.0)
+
+
 @dataclasses.dataclass(frozen=True)
 class ObjectiveTerm:
     """A built-in objective term: ``fn(outcomes, weights, arg, temperature)`` (temperature
-    ``None``: the hard value), the outcome fields it reads, and what its argument means."""
+    ``None``: the hard value), the outcome fields it reads, and what its argument means.
+    ``weights`` is 1 for the runs that end ``ok`` and 0 for the others, or, for a term over
+    every run (``over_ok=False``), 1 for every run and 0 for a batch's padding."""
 
     fn: Callable
     fields: tuple[str, ...]
     doc: str
     arg: str = ""  # meaning of the argument in name(arg); "" = none
+    over_ok: bool = True
 
 
 TERMS: dict[str, ObjectiveTerm] = {
@@ -87,9 +108,14 @@ TERMS: dict[str, ObjectiveTerm] = {
     "peak_load": ObjectiveTerm(
         _peak_load, ("load_peak_g",), "mean excess of the peak load over a limit, g", "limit in g"
     ),
+    "failed": ObjectiveTerm(
+        _failed, (), "fraction of the runs that did not end ok (over every run)", over_ok=False
+    ),
 }
 """Built-in objective terms by name: a weighted sum of them is written ``"miss_rms+10*dv_mean"``
-(``peak_load(8)``, ``hit_probability(300)`` take an argument)."""
+(``peak_load(8)``, ``hit_probability(300)`` take an argument). Every term but ``failed`` is
+taken over the runs that end ``ok``; ``failed`` counts the others, so that
+``"miss_rms+100*failed"`` prices a failed run where the other terms cannot see it."""
 
 _TERM_SEPARATOR = re.compile(r"(?<![0-9.][eE])\+")
 """A '+' between terms, not the sign of a weight's exponent (``1e+3*miss_rms``)."""
@@ -118,8 +144,9 @@ class Objective:
 
     ``value(outcomes, weights, temperature)`` is the smooth objective at ``temperature`` and the
     hard one for ``temperature=None``; ``weights`` is 1 for the runs that count (status ``ok``)
-    and 0 for the others (a built-in term is NaN when no run counts). A user callable
-    ``fn(outcomes, weights)`` is used for both.
+    and 0 for the others (a built-in term is NaN when no run counts), ``runs`` 1 for the runs
+    of the batch and 0 for its padding (default: every run), which the ``failed`` term is
+    over. A user callable ``fn(outcomes, weights)`` is used for both.
     """
 
     spec: str
@@ -136,25 +163,33 @@ class Objective:
     def weights(self):
         return jnp.asarray([w for w, _, _ in self.terms], dtype=jnp.float64)
 
-    def value(self, outcomes, weights, temperature=None, term_weights=None):
+    def value(self, outcomes, weights, temperature=None, term_weights=None, runs=None):
         if self.fn is not None:
             return self.fn(outcomes, weights)
         term_weights = self.weights if term_weights is None else term_weights
         return sum(
-            term_weights[i] * TERMS[name].fn(outcomes, weights, arg, temperature)
+            term_weights[i] * _term(name, outcomes, weights, runs, arg, temperature)
             for i, (_, name, arg) in enumerate(self.terms)
         )
 
-    def term_values(self, outcomes, weights) -> dict[str, float]:
+    def term_values(self, outcomes, weights, runs=None) -> dict[str, float]:
         """The hard value of each term (for the held-out table)."""
         return {
-            _term_label(name, arg): float(TERMS[name].fn(outcomes, weights, arg, None))
+            _term_label(name, arg): float(_term(name, outcomes, weights, runs, arg, None))
             for _, name, arg in self.terms
         }
 
     @property
     def fields(self) -> tuple[str, ...]:
         return tuple(f for _, name, _ in self.terms for f in TERMS[name].fields)
+
+
+def _term(name, outcomes, weights, runs, arg, temperature):
+    """Term ``name`` over the ``ok`` runs (``weights``) or over every run (``runs``)."""
+    term = TERMS[name]
+    if not term.over_ok:
+        weights = jnp.ones_like(weights) if runs is None else runs
+    return term.fn(outcomes, weights, arg, temperature)
 
 
 def _term_label(name, arg):

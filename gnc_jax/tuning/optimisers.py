@@ -257,7 +257,8 @@ def _run_cma(
         candidates = es.ask()
         members = np.concatenate([mean[None], np.asarray(candidates)])
         values, failed = (np.asarray(x) for x in fn(problem.args, members, idx, valid))
-        # fewer failed runs rank first; a member with no ok run (non-finite) last
+        # fewer failed runs rank first, a member with no ok run last (CMA-ES ranks: any
+        # scores in that order give the same generation)
         scores = lexicographic_scores(values[1:], failed[1:])
         es.tell(candidates, [float(v) if np.isfinite(v) else 1e300 for v in scores])
         rec = _record(problem, s, values[0], mean, None, (s + 1) * per_member * 2 * population, 0)

@@ -15,11 +15,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._status import Status
 from ..montecarlo import batch_function, build
 from ..params import declared_params
 from ..scenario import Scenario
-from .objectives import _check_fields
+from .objectives import _check_fields, counted
 from .parametrisation import Gain, Reparametrisation
 
 HELDOUT_OFFSET = 2**30
@@ -141,13 +140,8 @@ class TuningProblem:
 
     @staticmethod
     def weights(outcomes, valid):
-        # as run_study: a run with a non-finite float outcome is a failed (``nan``) run
-        ok = outcomes.status == Status.ok
-        finite = jnp.ones_like(valid, dtype=bool)
-        for x in outcomes:
-            if jnp.issubdtype(x.dtype, jnp.floating):
-                finite &= jnp.isfinite(x).reshape(x.shape[0], -1).all(axis=1)
-        return jnp.where(ok & finite, valid, 0.0)
+        """1 for the real runs (``valid`` 1) that count (:func:`~.objectives.counted`), else 0."""
+        return jnp.where(counted(outcomes), valid, 0.0)
 
     @classmethod
     def failed(cls, outcomes, valid):
@@ -162,7 +156,8 @@ class TuningProblem:
         law = law.relax(temperature) if temperature is not None else law.relax()
         fn = self.reverse_fn if gradient == "reverse" else self.fn
         out = fn(sim, self.law_at(law, self.param.gains(theta)), seed, indices)
-        return self.objective.value(out, self.weights(out, valid), temperature, term_weights)
+        weights = self.weights(out, valid)
+        return self.objective.value(out, weights, temperature, term_weights, runs=valid)
 
     def value_and_grad(self, args, theta, temperature, indices, valid, gradient):
         """The relaxed objective at ``theta`` (:meth:`smooth`) and its gradient: ``jax.grad``
@@ -183,7 +178,7 @@ class TuningProblem:
         """``(objective, outcomes)`` of the hard logic with gains ``gains_file``."""
         sim, law, seed, term_weights = args
         out = self.fn(sim, self.law_at(law, gains_file), seed, indices)
-        value = self.objective.value(out, self.weights(out, valid), None, term_weights)
+        value = self.objective.value(out, self.weights(out, valid), None, term_weights, valid)
         return value, out
 
     def hard_outcomes(self, gains_file, indices):
