@@ -1,5 +1,7 @@
 """Binomial intervals against scipy (an established implementation)."""
 
+import re
+
 import numpy as np
 import pytest
 from scipy import stats
@@ -88,3 +90,30 @@ def test_a_spread_from_one_ok_run_is_none_not_zero(kind, capsys):
     _print_summary({"scenario": kind, "runs": 5, "failed": 5})
     shown = [ours for _, _, ours in comparison_rows({"kind": kind, "paper": paper})]
     assert shown == ["—"] * len(spreads)
+
+
+@pytest.mark.parametrize("kind", ["impactor", "intercept", "capsule", "midcourse"])
+def test_the_printed_summary_shows_numbers_not_python_records(kind, capsys):
+    """Every statistic of every system prints as numbers: records (the capsule's per-axis
+    error records, the device) as `key value` pairs, intervals as [lo, hi], the firing
+    histogram as runs per firing count, and a missing spread as n/a, never as a Python dict,
+    `None` or a 17-digit float."""
+    from gnc_jax.cli.output import _print_summary
+    from gnc_jax.systems import get_system
+    from gnc_jax.systems.capsule.state import CapsuleOutcome
+    from gnc_jax.systems.impactor.state import ImpactorOutcome
+    from gnc_jax.systems.intercept.state import PNOutcome
+    from gnc_jax.systems.midcourse.simulation import MidcourseOutcome
+
+    types = dict(impactor=ImpactorOutcome, intercept=PNOutcome, capsule=CapsuleOutcome,
+                 midcourse=MidcourseOutcome)  # fmt: skip
+    o = _outcomes(types[kind], 5, np.random.default_rng(2))
+    system = get_system(kind)
+    device = {"platform": "cpu", "device_count": 2, "memory_gb": 25.28123456}
+    for ok in (np.arange(5) == 2, np.arange(5) >= 2):
+        stats = system.statistics(o, ok)
+        _print_summary({"scenario": kind, "runs": 5, "failed": 1, "device": device, **stats})
+        printed = capsys.readouterr().out
+        assert "{" not in printed and "None" not in printed and "': " not in printed, printed
+        assert not re.search(r"\d\.\d{10,}", printed), printed
+        assert "platform cpu, device_count 2, memory_gb 25.28" in printed

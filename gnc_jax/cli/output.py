@@ -7,22 +7,33 @@ def _too_many_failed(summary: dict, max_failed: float) -> bool:
     return summary["failed"] > max_failed * summary["runs"]
 
 
+def _format_value(value) -> str:
+    """One summary value as text: floats to 4 significant digits, `None` (a spread from fewer
+    than two ok runs) as n/a, intervals as [lo, hi], a record as `key value` pairs."""
+    if value is None:
+        return "n/a"
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_format_value(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return ", ".join(f"{k} {_format_value(v)}" for k, v in value.items())
+    return str(value)
+
+
 def _print_summary(summary: dict) -> None:
     skip = {"paper", "firings_histogram", "failed_by_status", "description", "warnings"}
     width = max(len(k) for k in summary)
     for key, value in summary.items():
         if key in skip:
             continue
-        text = f"{value:.4g}" if isinstance(value, float) else str(value)
-        if value is None:  # a spread from fewer than two ok runs
-            text = "n/a"
-        if isinstance(value, list) and value and all(isinstance(v, float) for v in value):
-            text = "[" + ", ".join(f"{v:.4g}" for v in value) + "]"
-        print(f"  {key:<{width}}  {text}")
+        print(f"  {key:<{width}}  {_format_value(value)}")
     if summary.get("failed_by_status"):
-        print(f"  {'failed_by_status':<{width}}  {summary['failed_by_status']}")
+        print(f"  {'failed_by_status':<{width}}  {_format_value(summary['failed_by_status'])}")
     if summary.get("firings_histogram"):
-        print(f"  {'firings_histogram':<{width}}  {summary['firings_histogram']}")
+        counts = {int(k): n for k, n in summary["firings_histogram"].items()}  # JSON: str keys
+        runs = ", ".join(f"{k} firing{'s' * (k != 1)}: {n}" for k, n in counts.items())
+        print(f"  {'firings_histogram':<{width}}  {runs}")
     from ..reproduction import comparison_rows
 
     rows = comparison_rows(summary)
