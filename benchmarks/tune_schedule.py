@@ -100,9 +100,12 @@ def main():
 def print_reach(results, baseline):
     """Each method's runs and training wall time to the baseline's final monitored held-out
     objective, as a ratio to the baseline's own."""
-    monitored = [h["heldout"] for h in results[baseline].history if h.get("heldout") is not None]
-    target = monitored[-1]
-    print(f"target: {baseline}'s final monitored held-out objective {target:.3f}")
+    monitored = [h for h in results[baseline].history if h.get("heldout") is not None]
+    target = monitored[-1]  # its objective and failed runs: fewer failed runs rank first
+    print(
+        f"target: {baseline}'s final monitored held-out objective {target['heldout']:.3f}"
+        f" ({target.get('heldout_failed', 0)} failed)"
+    )
     own = results[baseline].runs_to_reach(target)
     for method, r in results.items():
         reach = r.runs_to_reach(target)

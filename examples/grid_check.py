@@ -35,9 +35,12 @@ for i in range(len(params)):
 order = tuning.resolve_gains(scenario, params)
 param = tuning.Reparametrisation.of(scenario, order)
 valid = [g for g in points if np.all(np.isfinite(param.theta(g)))] if points else []
-values = tuning.hard_objectives(scenario, params, args.objective, valid, args.runs)
-for g, v in zip(valid, values, strict=True):
-    print(f"{np.round(g, 4)}: {v:.5g} ({100 * (v / values[0] - 1):+.2f} %)", flush=True)
+scores = tuning.hard_scores(scenario, params, args.objective, valid, args.runs)
+for g, (v, failed) in zip(valid, scores, strict=True):
+    note = f", {failed} failed runs" if failed else ""
+    print(f"{np.round(g, 4)}: {v:.5g} ({100 * (v / scores[0][0] - 1):+.2f} %{note})", flush=True)
+best = min(range(len(scores)), key=lambda i: tuning.ranking_key(*scores[i]))
+print(f"best (fewest failed runs, then the objective): {np.round(valid[best], 4)}", flush=True)
 
 problem = tuning.TuningProblem(scenario, order, tuning.parse_objective(args.objective, scenario), 0)
 idx, w = problem.padded(np.arange(args.gradient_runs))

@@ -91,11 +91,11 @@ if "headline" in globals():
                    for b in (1 - args.grid, 1.0, 1 + args.grid)]  # fmt: skip
         points = [[centre[0] * a, centre[1] * b] for a, b in factors]
         keep = [i for i, g in enumerate(points) if g[1] <= g[0]]
-        values = tuning.hard_objectives(
+        scores = tuning.hard_scores(
             scenario, params, objective, [points[i] for i in keep], args.heldout
-        )
-        grid = [(*factors[i], v) for i, v in zip(keep, values, strict=True)]
-        best = min(grid, key=lambda x: x[2])
+        )  # (objective, failed runs): fewer failed runs rank first
+        grid = [(*factors[i], v, f) for i, (v, f) in zip(keep, scores, strict=True)]
+        best = min(grid, key=lambda x: tuning.ranking_key(x[2], x[3]))
         centre_value = [g[2] for g in grid if g[0] == 1.0 and g[1] == 1.0][0]
         print(
             f"grid around ({centre[0]:.3g}, {centre[1]:.3g}) x(1 +- {args.grid}): best at "
@@ -120,10 +120,17 @@ if "headline" in globals():
             runs[method] = r
             print(method, [(h["runs"], round(h["wall_s"], 1), h.get("heldout")) for h in r.history
                            if h.get("heldout") is not None], flush=True)  # fmt: skip
-        target = max(min(h["heldout"] for h in r.history if "heldout" in h) for r in runs.values())
+
+        # the worse of the methods' best held-out records, ranked as the tuner ranks them
+        def rank(h):
+            return tuning.ranking_key(h["heldout"], h.get("heldout_failed", 0))
+
+        best = [min((h for h in r.history if "heldout" in h), key=rank) for r in runs.values()]
+        target = max(best, key=rank)
         for method, r in runs.items():
             reach = r.runs_to_reach(target)
-            print(f"{method}: reaches held-out objective {target:.5g} at (runs, wall s) {reach};"
-                  f" compile {r.compile_s:.1f} s", flush=True)  # fmt: skip
+            print(f"{method}: reaches held-out objective {target['heldout']:.5g} "
+                  f"({target.get('heldout_failed', 0)} failed) at (runs, wall s) {reach}; "
+                  f"compile {r.compile_s:.1f} s", flush=True)  # fmt: skip
     print(heldout_table(headline.heldout))
 print(f"wrote {out}")

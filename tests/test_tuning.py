@@ -591,6 +591,48 @@ def test_a_gain_that_fails_more_runs_never_ranks_better(monkeypatch):
     )
 
 
+def test_a_held_out_record_that_fails_more_runs_never_reaches_the_target(monkeypatch):
+    """The ``eval_every`` held-out records carry their failed runs, and ``runs_to_reach``
+    ranks them as the training check does: a lower objective with more failed runs does not
+    reach a target, fewer failed runs do; a grid's ``hard_scores`` hold both numbers."""
+    from gnc_jax.tuning import optimisers
+
+    scores = iter([(5.0, 2), (8.0, 0), (7.0, 1)])
+    monkeypatch.setattr(optimisers, "_hard_scored", lambda *a: next(scores))
+
+    class Param:
+        def gains(self, theta):
+            return theta
+
+    problem = type("P", (), {"param": Param()})()
+    monitor = dict(check_runs=0, check_every=0, eval_every=1, eval_runs=16)
+    history = []
+    for s in range(3):
+        rec = dict(step=s, runs=8 * (s + 1), wall_s=float(s + 1))
+        optimisers._monitor(problem, rec, np.array([1.0]), s, 3, monitor)
+        history.append(rec)
+    assert [(h["heldout"], h["heldout_failed"]) for h in history] == [(5.0, 2), (8.0, 0), (7.0, 1)]
+    assert "held-out 5 (2 failed)" in optimisers.progress_line(
+        dict(history[0], objective=1.0, gains=[1.0]), ["k"]
+    )
+    result = tune_module.TuneResult(
+        None, None, ["k"], [1.0], [1.0], "miss_rms", "adam", 0, 8, 3, history, None, 0.0, 0.0
+    )
+    # target 6 with no failed run: 5.0 (2 failed) and 7.0 (1 failed) rank worse, 8.0 too
+    assert result.runs_to_reach(6.0) is None
+    assert result.runs_to_reach(8.0) == (16, 2.0)
+    # a target record that failed one run: 5.0 with 2 failed still does not reach it
+    assert result.runs_to_reach({"heldout": 6.0, "heldout_failed": 1}) == (16, 2.0)
+    assert result.runs_to_reach(4.0, failed=2) == (16, 2.0)  # fewer failed runs rank first
+    assert result.runs_to_reach(5.0, failed=2) == (8, 1.0)
+    # hard_scores: each gain's (objective, failed runs) on the held-out runs
+    values = tune_module.hard_scores(toy(), ["guidance.pn.n"], "miss_rms", [[3.0], [4.0]], 8)
+    assert [f for _, f in values] == [0, 0]
+    assert [v for v, _ in values] == tune_module.hard_objectives(
+        toy(), ["guidance.pn.n"], "miss_rms", [[3.0], [4.0]], 8
+    )
+
+
 def _toy_outcomes(status, miss_m):
     from toy_system import ToyOutcome
 
@@ -624,6 +666,42 @@ def test_the_failed_term_is_the_fraction_of_the_runs_not_ok(monkeypatch):
     assert terms["failed"] == 3.0 / 8.0
     with pytest.raises(ScenarioError, match="failed takes no argument"):
         parse_objective("miss_rms+failed(2)", scenario)
+
+
+def test_a_user_objective_that_takes_runs_tells_padding_from_failed_runs(monkeypatch):
+    """A callable ``fn(outcomes, weights, runs)`` gets the batch's mask (1: a real run, 0:
+    padding) besides the counted runs, so that it can price failures; ``fn(outcomes,
+    weights)`` is called as it always was."""
+    scenario = toy()
+    (gain,) = resolve_gains(scenario, ["guidance.pn.n"])
+    ok, time_out = int(gj.Status.ok), int(gj.Status.time_out)
+    out = _toy_outcomes([ok, time_out, ok, ok, ok, time_out], [3.0, 900.0, 4.0, 1.0, 2.0, 900.0])
+    seen = {}
+
+    def priced(outcomes, weights, runs):
+        seen["weights"], seen["runs"] = np.asarray(weights), np.asarray(runs)
+        return jnp.sum(weights * outcomes.miss_m) + 100.0 * jnp.sum(runs - weights)
+
+    def plain(outcomes, weights):
+        seen["plain"] = np.asarray(weights)
+        return jnp.sum(weights * outcomes.miss_m)
+
+    idx = None
+    for fn in (priced, plain):
+        problem = tune_module.TuningProblem(scenario, [gain], parse_objective(fn, scenario), 0)
+        monkeypatch.setattr(problem, "fn", lambda *a: out)
+        idx, valid = problem.padded(np.arange(4), size=6)  # runs 0..3 real, 2 padding
+        value, _ = problem.hard(problem.args, np.array([3.0]), idx, valid)
+        if fn is priced:
+            np.testing.assert_array_equal(seen["runs"], [1, 1, 1, 1, 0, 0])
+            np.testing.assert_array_equal(seen["weights"], [1, 0, 1, 1, 0, 0])
+            assert float(value) == 3.0 + 4.0 + 1.0 + 100.0 * 1  # one failed real run
+        else:
+            np.testing.assert_array_equal(seen["plain"], [1, 0, 1, 1, 0, 0])
+            assert float(value) == 8.0
+    # no mask given (the held-out table's resamples): every run is a real run
+    counted = jnp.asarray([1.0, 0.0, 1.0, 1.0, 1.0, 0.0])
+    assert float(parse_objective(priced, scenario).value(out, counted)) == 10.0 + 100.0 * 2
 
 
 def test_heldout_table_has_the_failed_fraction_of_every_held_out_run(monkeypatch):

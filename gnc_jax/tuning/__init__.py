@@ -27,7 +27,14 @@ The parts, one file each: ``objectives`` (the terms and their sums), ``parametri
 ``tuner`` (:func:`tune`).
 """
 
-from .evaluation import evaluate_heldout, hard_objectives, heldout_table, paired_interval
+from .evaluation import (
+    evaluate_heldout,
+    hard_objectives,
+    hard_scores,
+    heldout_table,
+    paired_interval,
+    ranking_key,
+)
 from .objectives import TERMS, Objective, ObjectiveTerm, parse_objective
 from .optimisers import default_optimizer, progress_line
 from .parametrisation import Gain, Reparametrisation, resolve_gains, with_schedule_starts
@@ -53,6 +60,8 @@ __all__ = [
     "heldout_indices",
     "evaluate_heldout",
     "hard_objectives",
+    "hard_scores",
+    "ranking_key",
     "heldout_table",
     "paired_interval",
     "default_optimizer",

@@ -21,10 +21,6 @@ def _hard_scored(problem, gains, indices) -> tuple[float, int]:
     return float(value), int(round(float(problem.failed(out, valid))))
 
 
-def _hard_objective(problem, gains, indices) -> float:
-    return _hard_scored(problem, gains, indices)[0]
-
-
 def ranking_key(value: float, failed: int) -> tuple[int, float]:
     """The order of gains evaluated on the same runs: fewer failed runs first, then the lower
     objective (an objective with no ok run, non-finite, last). A gain that turns runs into
@@ -50,15 +46,26 @@ def lexicographic_scores(values, failed):
     return np.where(finite, scores, np.max(scores[finite]) + spread)
 
 
-def hard_objectives(scenario, params, objective, gains, runs: int, seed: int = 0) -> list[float]:
-    """The hard objective of each gain vector of ``gains`` (file units) on the same ``runs``
-    held-out runs: a grid check, a sweep or a baseline on the runs :func:`tune` holds out."""
+def hard_scores(
+    scenario, params, objective, gains, runs: int, seed: int = 0
+) -> list[tuple[float, int]]:
+    """``(objective, failed runs)`` of each gain vector of ``gains`` (file units) on the same
+    ``runs`` held-out runs: a grid check, a sweep or a baseline on the runs :func:`tune` holds
+    out. Rank them with :func:`ranking_key` (``min(scores, key=lambda s: ranking_key(*s))``):
+    the built-in terms are taken over the ``ok`` runs, so the objective alone can prefer a gain
+    that fails more runs."""
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
     scenario = with_schedule_starts(scenario, params)
     resolved = resolve_gains(scenario, params)
     problem = TuningProblem(scenario, resolved, parse_objective(objective, scenario), seed)
-    return [_hard_objective(problem, g, heldout_indices(runs)) for g in gains]
+    return [_hard_scored(problem, g, heldout_indices(runs)) for g in gains]
+
+
+def hard_objectives(scenario, params, objective, gains, runs: int, seed: int = 0) -> list[float]:
+    """The hard objective of each gain vector of ``gains`` as :func:`hard_scores` evaluates
+    it, without the failed runs (to rank gains, use :func:`hard_scores`)."""
+    return [value for value, _ in hard_scores(scenario, params, objective, gains, runs, seed)]
 
 
 def paired_interval(stat_a, stat_b, n, confidence=0.95, resamples=1000, seed=0):

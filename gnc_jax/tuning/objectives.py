@@ -2,6 +2,7 @@
 callables, hard and smooth (:class:`Objective`, :func:`parse_objective`)."""
 
 import dataclasses
+import inspect
 import math
 import re
 from collections.abc import Callable, Sequence
@@ -146,7 +147,9 @@ class Objective:
     hard one for ``temperature=None``; ``weights`` is 1 for the runs that count (status ``ok``)
     and 0 for the others (a built-in term is NaN when no run counts), ``runs`` 1 for the runs
     of the batch and 0 for its padding (default: every run), which the ``failed`` term is
-    over. A user callable ``fn(outcomes, weights)`` is used for both.
+    over. A user callable ``fn(outcomes, weights)`` is used for both; one that takes a
+    ``runs`` argument, ``fn(outcomes, weights, runs)``, also gets that mask (all ones where no
+    padding), to tell a failed run (``weights`` 0, ``runs`` 1) from padding (both 0).
     """
 
     spec: str
@@ -165,7 +168,9 @@ class Objective:
 
     def value(self, outcomes, weights, temperature=None, term_weights=None, runs=None):
         if self.fn is not None:
-            return self.fn(outcomes, weights)
+            if not _takes_runs(self.fn):
+                return self.fn(outcomes, weights)
+            return self.fn(outcomes, weights, runs=jnp.ones_like(weights) if runs is None else runs)
         term_weights = self.weights if term_weights is None else term_weights
         return sum(
             term_weights[i] * _term(name, outcomes, weights, runs, arg, temperature)
@@ -182,6 +187,16 @@ class Objective:
     @property
     def fields(self) -> tuple[str, ...]:
         return tuple(f for _, name, _ in self.terms for f in TERMS[name].fields)
+
+
+def _takes_runs(fn) -> bool:
+    """Whether a user objective takes the ``runs`` mask (a parameter of that name or
+    ``**kwargs``)."""
+    try:
+        params = inspect.signature(fn).parameters.values()
+    except (TypeError, ValueError):  # a builtin or extension callable: two arguments
+        return False
+    return any(p.name == "runs" or p.kind is p.VAR_KEYWORD for p in params)
 
 
 def _term(name, outcomes, weights, runs, arg, temperature):

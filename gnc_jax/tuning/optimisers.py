@@ -46,7 +46,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from .evaluation import _hard_objective, _hard_scored, lexicographic_scores
+from .evaluation import _hard_scored, lexicographic_scores
 from .problem import TuningProblem, heldout_indices, train_indices
 
 REVERSE_FROM = 10
@@ -164,7 +164,9 @@ def _monitor(problem, rec, theta, s, steps, monitor):
         rec["check_gains"] = gains
     every = monitor["eval_every"]
     if every and (s % every == 0 or last):
-        rec["heldout"] = _hard_objective(problem, gains, heldout_indices(monitor["eval_runs"]))
+        rec["heldout"], rec["heldout_failed"] = _hard_scored(
+            problem, gains, heldout_indices(monitor["eval_runs"])
+        )
         rec["heldout_gains"] = gains
 
 
@@ -230,6 +232,8 @@ def progress_line(rec: dict, names) -> str:
         line += f"  T={rec['temperature']:.3g}"
     if rec.get("heldout") is not None:
         line += f"  held-out {rec['heldout']:.6g}"
+        if rec.get("heldout_failed"):
+            line += f" ({rec['heldout_failed']} failed)"
     if rec.get("nonfinite_gradient"):
         line += f"  gradient: {rec['nonfinite_gradient']} non-finite component(s) taken as 0"
     return line + f"  ({rec['wall_s']:.1f} s)"

@@ -7,7 +7,7 @@ import pathlib
 from typing import Any
 
 from ..scenario import Scenario
-from .evaluation import heldout_table
+from .evaluation import heldout_table, ranking_key
 
 
 @dataclasses.dataclass
@@ -53,12 +53,20 @@ class TuneResult:
     def tuned_gains(self) -> dict[str, float]:
         return dict(zip(self.names, self.tuned, strict=True))
 
-    def runs_to_reach(self, target: float):
-        """``(runs, wall_s)`` at the first held-out evaluation whose objective is at most
-        ``target`` (``None`` if none reached it)."""
+    def runs_to_reach(self, target: float | dict, failed: int = 0):
+        """``(runs, wall_s)`` at the first held-out evaluation that ranks no worse than the
+        target (``None`` if none does): ``target`` is an objective reached with ``failed``
+        failed held-out runs, or a held-out record of a history (another method's, whose
+        ``heldout`` and ``heldout_failed`` it takes). Records rank as the tuner's checks do
+        (:func:`~.evaluation.ranking_key`): fewer failed runs first, then the objective, so
+        an evaluation that fails more runs never reaches the target."""
+        if isinstance(target, dict):
+            target, failed = target["heldout"], target.get("heldout_failed", 0)
+        goal = ranking_key(target, failed)
         for h in self.history:
-            if h.get("heldout") is not None and h["heldout"] <= target:
-                return h["runs"], h["wall_s"]
+            if h.get("heldout") is not None:
+                if ranking_key(h["heldout"], h.get("heldout_failed", 0)) <= goal:
+                    return h["runs"], h["wall_s"]
         return None
 
     def table(self) -> str:
