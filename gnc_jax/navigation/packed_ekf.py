@@ -32,6 +32,11 @@ from .._types import Array, Covariance6, Float, Scalar, Vector3
 from .ekf import _S_FLOOR, MeasurementPrediction, _symmetric
 
 N_STATE = 6
+ANGLE_NOISE_FLOOR_RAD = 1e-8
+"""The least 1-sigma angle noise a filter assumes. A filter told its sensor is perfect
+(measurement variance 0) collapses its covariance onto rounding errors, and its innovations,
+pure rounding, then read as hundreds of sigma: navigation lost for a perfect sensor. One
+nanoradian is 1e4 below the papers' sensors and far above float64 rounding of the angles."""
 FULL = (0, 1, 2)
 PLANAR = (0, 1)
 """Position axes a packed covariance carries: all three, or the orbit plane's x and y (a planar

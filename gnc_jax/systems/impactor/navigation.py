@@ -11,6 +11,7 @@ from ...navigation.camera import camera_axes, rotate_rows, small_rotation_entrie
 from ...navigation.ekf import NavEstimate
 from ...navigation.measurements import Exposure, Measurement
 from ...navigation.packed_ekf import (
+    ANGLE_NOISE_FLOOR_RAD,
     LOSGain,
     PackedCovariance,
     apply_gain,
@@ -100,7 +101,9 @@ def image_update(
     """
     model = sim.noise_model
     c_true, c_est = attitudes
-    r_var = model.image_processing_rad**2 + model.attitude_noise_rad**2
+    r_var = jnp.maximum(
+        model.image_processing_rad**2 + model.attitude_noise_rad**2, ANGLE_NOISE_FLOOR_RAD**2
+    )
     # predict_los through the believed attitude, row by row.
     h_r, predicted = predict_los_packed(c_est, r_hat, p, r_var)
     exposure = Exposure(-r_true, jnp.stack(c_true), jnp.stack(c_est))

@@ -15,6 +15,7 @@ from ...navigation.camera import camera_axes
 from ...navigation.ekf import NavEstimate
 from ...navigation.measurements import Exposure
 from ...navigation.packed_ekf import (
+    ANGLE_NOISE_FLOOR_RAD,
     FULL,
     PLANAR,
     PackedCovariance,
@@ -68,7 +69,7 @@ def take_image(
     # matrix is built only for the front end's exposure (read row-wise it is never stored).
     rows = camera_axes(-r_hat, sim.context.reference_normal)
     c_cam = jnp.stack([as_array(row) for row in rows])
-    r_var = jnp.maximum(sim.model_attitude_rad, 1e-9) ** 2
+    r_var = jnp.maximum(sim.model_attitude_rad, ANGLE_NOISE_FLOOR_RAD) ** 2
     h_r, predicted = predict_los_packed(rows, r_hat, p, r_var)
     nav = NavEstimate(jnp.concatenate([as_array(r_hat), as_array(v_hat)]), unpack(p))
     meas = sim.measurement(Exposure(-as_array(r_true), c_cam, c_cam), nav, predicted, w, key)

@@ -40,6 +40,28 @@ def test_the_law_corrects_the_delivery_error(short_scenario):
     assert s["dv_mean_mps"] > 1.0
 
 
+PERFECT = [
+    f"errors.{name}=0.0"
+    for name in ("image_processing_urad", "attitude_control_urad", "attitude_bias_urad",
+                 "attitude_noise_urad", "accel_bias_ug", "accel_noise_ug", "burn_magnitude_pct")
+]  # fmt: skip
+
+
+def test_a_perfect_sensor_keeps_navigation(short_scenario):
+    """With every error source at zero the filter assumes at least a 10 nrad angle noise
+    (``packed_ekf.ANGLE_NOISE_FLOOR_RAD``): told 0 it collapsed onto rounding errors and read
+    its own rounding as hundreds of sigma, so every run ended nav_lost. Predictive guidance
+    then lands within a metre; the LOS law's tolerances, k sqrt(E^2+F^2), shrink with the
+    navigation error, so some of its runs may run out of propellant, but none loses
+    navigation."""
+    sc = short_scenario.with_overrides(PERFECT)
+    study = gj.run_study(sc, runs=20, seed=0, progress=False)  # the compiled program above
+    status = study.outcomes["status"]
+    assert not np.any(status == gj.Status.nav_lost), np.bincount(status)
+    if short_scenario.name == "deep-impact-predictive":
+        assert np.all(status == gj.Status.ok) and study.summary()["miss_max_m"] < 1.0
+
+
 def test_an_image_interval_that_does_not_divide_the_arc_ends_the_loop_at_the_cutoff():
     # 3000 s images on the 7140 s to the cut-off: two full intervals and one of 1140 s, so the
     # loop ends at the cut-off, 60 s (612 km) before the B-plane, and not at 9000 s, past it.
