@@ -322,8 +322,8 @@ class LOSSwitchingCurveLaw:
         cz = rho[0] * vy - rho[1] * vx
         omega = math.sqrt(cx * cx + cy * cy + cz * cz) / rr
         t_go = rho_n / math.sqrt(vx * vx + vy * vy + vz * vz)
-        rho_close = max(self.k2 * sigma_b, self.resolution_per_tgo * t_go)
-        rho_open = max(self.k1 * sigma_b, rho_close)
+        sigma = max(sigma_b, self.resolution_per_tgo * t_go / self.k2)  # the band kept k1/k2
+        rho_close, rho_open = self.k2 * sigma, self.k1 * sigma
         w_open = self.switching_curve(rho_n, rdot, rho_open)
         w_close = self.switching_curve(rho_n, rdot, rho_close)
         on = 1.0 if omega >= w_open else (0.0 if omega <= w_close else engine_on)

@@ -674,6 +674,9 @@ def _run(
                 # gets harder as rho_o^2 grows: where it fails at a lower bound of rho_o^2 the
                 # floor's division is not needed (a_floor / vv rounded is within a_floor *
                 # (1 / vv) (1 +- 2^-50) where both are normal numbers).
+                # The floor is on sigma_B^2 (a_floor / vv / k2^2), both tolerances scaled
+                # from it: rounding is monotone, so a lower bound of a_floor / vv gives one of
+                # rho_o^2.
                 a_lo = a_floor * inv_vv
                 if not (
                     engine_on == 0.0
@@ -681,11 +684,12 @@ def _run(
                     and 2.3e-308 <= a_lo < 1e300
                     and not _opens(
                         rr, oo, qq, closing,
-                        max(open_nav, max(close_nav, a_lo * (1.0 - 2.0**-50))),
+                        k1sq * max(sb2, a_lo * (1.0 - 2.0**-50) / k2sq),
                     )
                 ):  # fmt: skip
-                    close2 = max(close_nav, a_floor / vv)
-                    open2 = max(open_nav, close2)
+                    s2_floor = max(sb2, a_floor / vv / k2sq)
+                    close2 = k2sq * s2_floor
+                    open2 = k1sq * s2_floor
                     if _opens(rr, oo, qq, closing, open2):
                         engine_on = 1.0
                     elif (

@@ -44,17 +44,22 @@ def _resolution_per_tgo(ctx: ImpactorGuidanceContext):
 
 def miss_limits(k1, k2, sigma_b, rho_n, nav, ctx: ImpactorGuidanceContext):
     """``(rho_min, rho_max)``: the shut-off and opening miss tolerances, k2 sigma_B and
-    k1 sigma_B (seed 000 §3.3), neither below half the miss one control step's burn moves.
+    k1 sigma_B (seed 000 §3.3), with sigma_B no smaller than the shut-off tolerance at half
+    the miss one control step's burn moves needs.
 
     One control step of thrust changes the predicted miss by about (T/m) dt t_go; a shut-off
     tolerance below half of that cannot be met by whole steps, and with perfect navigation
-    (sigma_B -> 0) the engine would never close. The floor binds only then: in the paper
-    scenarios k2 sigma_B is larger (see the regression test of a zero-error run).
+    (sigma_B -> 0) the engine would never close. The floor is on sigma_B, not on each
+    tolerance, so that it keeps the hysteresis band k1/k2: flooring both tolerances at the
+    same value closed the band, and with an accurate sensor the engine toggled every few steps
+    until the propellant was gone. The floor binds only with navigation far better than the
+    papers': in their scenarios k2 sigma_B is larger (see the regression test of a zero-error
+    run), and the tolerances are exactly k2 sigma_B and k1 sigma_B.
     """
     t_go = rho_n / safe_norm(nav.v)
     resolution = _resolution_per_tgo(ctx) * t_go
-    rho_min = jnp.maximum(k2 * sigma_b, resolution)
-    return rho_min, jnp.maximum(k1 * sigma_b, rho_min)
+    sigma = jnp.maximum(sigma_b, resolution / k2)
+    return k2 * sigma, k1 * sigma
 
 
 def _hard_switch(rho, rho_dot, state, nav, k1, k2, ctx: ImpactorGuidanceContext):
@@ -75,9 +80,9 @@ def _hard_switch(rho, rho_dot, state, nav, k1, k2, ctx: ImpactorGuidanceContext)
     vv = dot3(nav.v, nav.v)
     c = _resolution_per_tgo(ctx)
     resolution2 = c * c * rr / vv
-    s2 = state.sigma_b_m * state.sigma_b_m
-    close2 = jnp.maximum(k2 * k2 * s2, resolution2)
-    open2 = jnp.maximum(k1 * k1 * s2, close2)
+    s2 = jnp.maximum(state.sigma_b_m * state.sigma_b_m, resolution2 / (k2 * k2))
+    close2 = k2 * k2 * s2
+    open2 = k1 * k1 * s2
     closing = qv < 0.0
     opens = (rr > open2) & (~closing | (oo * (rr - open2) >= open2 * (qv * qv)))
     closes = (rr <= close2) | (

@@ -111,16 +111,19 @@ def test_hysteresis_logic():
 
 def test_shut_off_tolerance_has_the_engine_resolution_as_floor():
     # One control step of thrust moves the predicted miss by (T/m) dt t_go; the shut-off
-    # tolerance never goes below half of it (with sigma_B -> 0 the engine could never close).
+    # tolerance never goes below half of it (with sigma_B -> 0 the engine could never close),
+    # and the opening tolerance stays k1/k2 times the shut-off one (a closed band toggles the
+    # engine every few steps: see test_a_perfect_sensor_keeps_navigation).
     ctx = context(retarget_time_s=jnp.asarray(1e9))
     r, v = np.array([5e7, 0.0, 0.0]), np.array([-1.02e4, 0.0, 0.0])
     nav = nav_at(r, v)
     t_go = 5e7 / 1.02e4
     half_step = 0.5 * float(ctx.engine.thrust_n / ctx.mass_kg) * ctx.dt_s * t_go
-    for sigma in (0.0, 1.0, 100.0):
-        lo, hi = miss_limits(4.0, 1.0, sigma, 5e7, nav, ctx)
-        assert float(lo) == pytest.approx(max(sigma, half_step))
-        assert float(hi) == pytest.approx(max(4 * sigma, half_step))
+    for k2 in (1.0, 2.0):
+        for sigma in (0.0, 1.0, 100.0, 2e3):
+            lo, hi = miss_limits(4.0, k2, sigma, 5e7, nav, ctx)
+            assert float(lo) == pytest.approx(max(k2 * sigma, half_step))
+            assert float(hi) == pytest.approx(4.0 / k2 * max(k2 * sigma, half_step))
     lo, hi = miss_limits(4.0, 1.0, 1e4, 5e7, nav, ctx)  # a paper-like sigma: the paper's levels
     assert (float(lo), float(hi)) == (1e4, 4e4)
 

@@ -51,15 +51,17 @@ def test_a_perfect_sensor_keeps_navigation(short_scenario):
     """With every error source at zero the filter assumes at least a 10 nrad angle noise
     (``packed_ekf.ANGLE_NOISE_FLOOR_RAD``): told 0 it collapsed onto rounding errors and read
     its own rounding as hundreds of sigma, so every run ended nav_lost. Predictive guidance
-    then lands within a metre; the LOS law's tolerances, k sqrt(E^2+F^2), shrink with the
-    navigation error, so some of its runs may run out of propellant, but none loses
-    navigation."""
+    then lands within a metre. The LOS law's tolerances, k sqrt(E^2+F^2), shrink with the
+    navigation error to the one-step resolution floor; with both tolerances at that floor the
+    engine toggled every few steps and a quarter of the runs ran out of propellant: the floor
+    keeps the band k1/k2 wide."""
     sc = short_scenario.with_overrides(PERFECT)
     study = gj.run_study(sc, runs=20, seed=0, progress=False)  # the compiled program above
     status = study.outcomes["status"]
-    assert not np.any(status == gj.Status.nav_lost), np.bincount(status)
-    if short_scenario.name == "deep-impact-predictive":
-        assert np.all(status == gj.Status.ok) and study.summary()["miss_max_m"] < 1.0
+    assert np.all(status == gj.Status.ok), np.bincount(status)
+    s = study.summary()
+    assert s["miss_max_m"] < (1.0 if short_scenario.name == "deep-impact-predictive" else 50.0)
+    assert s["dv_max_mps"] < 20.0 and s["firings_max"] <= 8
 
 
 def test_an_image_interval_that_does_not_divide_the_arc_ends_the_loop_at_the_cutoff():
