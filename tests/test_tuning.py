@@ -530,6 +530,53 @@ def test_built_in_terms_match_numpy_and_their_relaxations_tend_to_them():
     assert smooth[0] > smooth[1] > smooth[2] and smooth[2] < 1e-2
 
 
+def test_hit_probability_without_a_radius_counts_what_the_study_counts():
+    """Given no radius, hit_probability is 1 - the study's P(hit): B-plane points inside the
+    target's silhouette. deep-impact-los's Tempel 1 (semi-axes 2.45, 2.45, 3.8 km, the long
+    axis along R) holds most points about the (1, 3) km aim point, 3.16 km from the centre and
+    so beyond the smallest semi-axis; counted against the axis-aligned ellipse directly."""
+    from typing import NamedTuple
+
+    from gnc_jax.geometry.silhouette import silhouette_ratio
+    from gnc_jax.systems.impact import hit_statistics
+    from gnc_jax.systems.impactor.simulation import capture_silhouette
+    from gnc_jax.tuning.objectives import _check_fields
+
+    class Out(NamedTuple):
+        status: np.ndarray
+        miss_m: np.ndarray
+        b_t_m: np.ndarray
+        b_r_m: np.ndarray
+        silhouette_ratio: np.ndarray
+
+    scenario = gj.load_scenario("deep-impact-los")
+    shadow = capture_silhouette(gj.build(scenario)[0])
+    rng = np.random.default_rng(5)
+    y = np.array([1000.0, 3000.0]) + rng.normal(0.0, 400.0, (400, 2))
+    ratio = np.asarray(jax.vmap(silhouette_ratio, (0, None, None))(jnp.asarray(y), shadow, 1.0))
+    w = (rng.uniform(size=400) > 0.1).astype(float)  # failed runs weigh 0
+    k = w > 0
+    out = Out(np.where(k, 0, 6), np.hypot(y[:, 0] - 1e3, y[:, 1] - 3e3), y[:, 0], y[:, 1], ratio)
+    inside = (y[:, 0] / 2450.0) ** 2 + (y[:, 1] / 3800.0) ** 2 < 1.0
+    assert 0.5 < inside[k].mean() < 1.0  # both outcomes occur
+
+    objective = parse_objective("hit_probability", scenario)
+    assert objective.terms == ((1.0, "hit_probability", None),)
+    got = objective.term_values(out, w)["hit_probability"]
+    np.testing.assert_allclose(got, 1.0 - inside[k].mean(), rtol=1e-12)
+    assert got == 1.0 - hit_statistics({"silhouette_ratio": ratio}, k)["hit_probability"]
+    smooth = [abs(float(objective.value(out, w, t)) - got) for t in (1e-1, 1e-2, 1e-4)]
+    assert smooth[0] > smooth[1] > smooth[2] and smooth[2] < 1e-2
+    # a radius is a disc about the target's centre, whatever the shape
+    disc = parse_objective("hit_probability(3000)", scenario).term_values(out, w)
+    np.testing.assert_allclose(
+        disc["hit_probability(3000)"], 1.0 - np.mean(np.hypot(y[:, 0], y[:, 1])[k] <= 3000.0)
+    )
+    # an outcome without a silhouette (a capsule's) is refused, naming the field it needs
+    with pytest.raises(ScenarioError, match="hit_probability needs the outcome 'silhouette_ratio'"):
+        _check_fields(objective, ("status", "downrange_err_km"), "capsule")
+
+
 def test_a_batch_without_an_ok_run_is_nan_and_never_the_selected_point(monkeypatch):
     """No run counts (every weight 0): each built-in term, and so the objective, is NaN, not
     the best possible 0; the training check then keeps the lowest finite checked point."""

@@ -54,8 +54,15 @@ def _impact_distance(out):
 
 
 def _hit_probability(out, w, radius, t):
-    """1 - P(hit): the fraction of runs whose impact point lies outside ``radius``; smooth: a
-    logistic of width ``t x radius``."""
+    """1 - P(hit). Without ``radius``: the study's hit rule (:mod:`gnc_jax.geometry.silhouette`,
+    a hit is ``silhouette_ratio < 1``: the B-plane point inside the target's capture
+    silhouette); smooth: a logistic of width ``t`` in that ratio. With ``radius`` (m): a hit is
+    an impact point within ``radius`` of the target's centre; smooth: a logistic of width
+    ``t x radius``."""
+    if radius is None:
+        if t is None:
+            return 1.0 - _wmean((out.silhouette_ratio < 1.0).astype(float), w)
+        return 1.0 - _wmean(jax.nn.sigmoid((1.0 - out.silhouette_ratio) / t), w)
     d = _impact_distance(out)
     if t is None:
         return 1.0 - _wmean((d <= radius).astype(float), w)
@@ -90,6 +97,12 @@ class ObjectiveTerm:
     doc: str
     arg: str = ""  # meaning of the argument in name(arg); "" = none
     over_ok: bool = True
+    arg_fields: tuple[str, ...] | None = None  # read instead of ``fields`` when an optional
+    # argument is given; None: the argument, if any, is required
+
+    def fields_for(self, arg) -> tuple[str, ...]:
+        """The outcome fields the term reads with argument ``arg`` (None: not given)."""
+        return self.fields if arg is None or self.arg_fields is None else self.arg_fields
 
 
 TERMS: dict[str, ObjectiveTerm] = {
@@ -97,9 +110,11 @@ TERMS: dict[str, ObjectiveTerm] = {
     "dv_mean": ObjectiveTerm(_dv_mean, ("dv_mps",), "mean Δv, m/s"),
     "hit_probability": ObjectiveTerm(
         _hit_probability,
-        ("miss_m",),
-        "1 - P(impact within the target's radius)",
-        arg="target radius in m (default: the scenario's target size)",
+        ("silhouette_ratio",),
+        "1 - P(hit): the study's hit rule (inside the target's B-plane silhouette), or with an "
+        "argument 1 - P(impact within that radius of the target's centre)",
+        arg="RADIUS_M, optional: a radius in m about the target's centre instead of its shape",
+        arg_fields=("miss_m",),
     ),
     "chute_rms": ObjectiveTerm(
         _chute_rms,
@@ -123,20 +138,19 @@ _TERM_SEPARATOR = re.compile(r"(?<![0-9.][eE])\+")
 _TERM_RE = re.compile(r"^\s*(?:([0-9.eE+-]+)\s*\*\s*)?([a-z_]+)\s*(?:\(\s*([^)]*)\s*\))?\s*$")
 
 
+def _term_forms(name: str, term: ObjectiveTerm) -> str:
+    """How a term is written: ``name``, ``name(ARG)``, or both where the argument is optional."""
+    if not term.arg:
+        return name
+    with_arg = f"{name}({term.arg.split(' ')[0].rstrip(',')})"
+    return with_arg if term.arg_fields is None else f"{name}, {with_arg}"
+
+
 def _allowed_objectives() -> str:
     return (
-        ", ".join(f"{n}({t.arg.split(' ')[0]})" if t.arg else n for n, t in TERMS.items())
+        ", ".join(_term_forms(n, t) for n, t in TERMS.items())
         + ", weighted sums such as 'miss_rms+10*dv_mean', or a callable(outcomes, weights)"
     )
-
-
-def _target_radius_m(scenario: Scenario) -> float | None:
-    target = scenario.config.get("target", {})
-    if "target_radius_m" in target:
-        return float(target["target_radius_m"])
-    if "semi_axes_km" in target:
-        return 1e3 * float(min(target["semi_axes_km"]))
-    return None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -186,7 +200,7 @@ class Objective:
 
     @property
     def fields(self) -> tuple[str, ...]:
-        return tuple(f for _, name, _ in self.terms for f in TERMS[name].fields)
+        return tuple(f for _, name, arg in self.terms for f in TERMS[name].fields_for(arg))
 
 
 def _takes_runs(fn) -> bool:
@@ -253,14 +267,7 @@ def parse_objective(objective, scenario: Scenario) -> Objective:
                 f"objective: {part.strip()!r}: weight {weight:g}; allowed: a finite weight >= 0 "
                 "(the tuner minimises the sum)"
             )
-        if name == "hit_probability" and arg is None:
-            arg = _target_radius_m(scenario)
-            if arg is None:
-                raise ScenarioError(
-                    f"objective: hit_probability: scenario {scenario.name} has no target size;"
-                    " allowed: hit_probability(RADIUS_M)"
-                )
-        if term.arg and arg is None:
+        if term.arg and term.arg_fields is None and arg is None:
             raise ScenarioError(f"objective: {name} needs an argument; allowed: {name}({term.arg})")
         if not term.arg and arg is not None:
             raise ScenarioError(f"objective: {name} takes no argument; allowed: {name}")
@@ -280,7 +287,7 @@ def parse_objective(objective, scenario: Scenario) -> Objective:
 def _check_fields(objective: Objective, outcome_fields: Sequence[str], kind: str) -> None:
     for f in objective.fields:
         if f not in outcome_fields:
-            name = next(n for _, n, _ in objective.terms if f in TERMS[n].fields)
+            name = next(n for _, n, a in objective.terms if f in TERMS[n].fields_for(a))
             usable = [n for n, t in TERMS.items() if all(x in outcome_fields for x in t.fields)]
             raise ScenarioError(
                 f"objective: {name} needs the outcome {f!r}, which {_article(kind)} {kind} run "
