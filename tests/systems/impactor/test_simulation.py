@@ -122,6 +122,48 @@ def test_hit_probability_counts_impacts_inside_the_target():
     np.testing.assert_allclose(s["hit_probability_ci95"], [ci.low, ci.high], atol=1e-12)
 
 
+def test_tempel_1_shadow_holds_the_aim_point_that_a_3_km_sphere_misses():
+    """deep-impact-los's target seen along its approach S: Tempel 1 (7.6 x 4.9 km; semi-axes
+    2.45, 2.45, 3.8 km) casts the B-plane shadow whose inside is a hit, against brute force: the
+    smallest x^T A x along each point's line parallel to S, sampled every metre. By hand, the
+    (1, 3) km aim point lies at 0.889 of the way to the shadow's edge (long axis along R) and
+    at sqrt(10) / 3 of a 3 km sphere's; points beyond the edge, though within 3.8 km of the
+    centre, count as misses, and a point beyond the short semi-axis hits the sphere only."""
+    import jax
+    import jax.numpy as jnp
+
+    from gnc_jax.geometry.silhouette import silhouette_ratio
+    from gnc_jax.systems.impact import hit_statistics
+    from gnc_jax.systems.impactor.simulation import capture_silhouette
+
+    def ratio(scenario, points):
+        shadow = capture_silhouette(gj.build(scenario)[0])  # focusing included
+        return np.asarray(jax.vmap(silhouette_ratio, (0, None, None))(points, shadow, 1.0))
+
+    scenario = gj.load_scenario("deep-impact-los")
+    sim, _ = gj.build(scenario)
+    c_bi, c_body = np.asarray(sim.context.c_bi), np.asarray(sim.target.c_bi)
+    a_mat = c_body @ np.diag(1.0 / np.array([2450.0, 2450.0, 3800.0]) ** 2) @ c_body.T
+    y = np.random.default_rng(7).uniform([-3000.0, -4500.0], [3000.0, 4500.0], (300, 2))
+    s = np.linspace(-5000.0, 5000.0, 10001)
+    x = (y @ c_bi[1:])[:, None, :] + s[None, :, None] * c_bi[0]
+    brute = np.einsum("npi,ij,npj->np", x, a_mat, x).min(axis=1) <= 1.0
+    got = ratio(scenario, jnp.asarray(y))
+    np.testing.assert_array_equal(got < 1.0, brute)
+    assert 0.2 < brute.mean() < 0.8  # both sides sampled
+
+    aim, beyond_r, beyond_t = [1000.0, 3000.0], [1500.0, 3400.0], [2600.0, 0.0]
+    points = jnp.asarray([aim, beyond_r, beyond_t, [0.0, -3700.0]])
+    assert np.all(np.hypot(*np.asarray(points).T) < 3800.0)
+    tempel = ratio(scenario, points)
+    np.testing.assert_allclose(tempel[0], np.hypot(1.0 / 2.45, 3.0 / 3.8), rtol=1e-12)
+    sphere = ratio(gj.load_scenario("deep-impact-los", ["target.semi_axes_km=[3, 3, 3]"]), points)
+    np.testing.assert_allclose(sphere[0], np.sqrt(10.0) / 3.0, rtol=1e-12)
+    hits = hit_statistics({"silhouette_ratio": tempel}, np.ones(4, bool))
+    assert hits["hits"] == 2 and list(tempel < 1.0) == [True, False, False, True]
+    assert list(sphere < 1.0) == [False, False, True, False]  # (2.6, 0) km: inside 3 km only
+
+
 def test_image_update_equals_the_dense_joseph_ekf_with_rodrigues_attitudes():
     # The loop's image (camera rows, series rotations, two scalar updates on the packed
     # covariance, NIS from the sequence) against the textbook chain: Rodrigues rotations,
