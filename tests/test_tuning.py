@@ -10,6 +10,7 @@ The tunings share their shapes (batches of 8 runs; training checks and held-out 
 12 for the weighted objective), so each of the tuner's programs compiles once in this module.
 """
 
+import dataclasses
 import json
 import os
 import pathlib
@@ -666,6 +667,34 @@ def test_the_failed_term_is_the_fraction_of_the_runs_not_ok(monkeypatch):
     assert terms["failed"] == 3.0 / 8.0
     with pytest.raises(ScenarioError, match="failed takes no argument"):
         parse_objective("miss_rms+failed(2)", scenario)
+
+
+def test_the_best_held_out_record_fails_the_fewest_runs():
+    """``best_heldout`` picks among the ``eval_every`` records as the training check picks:
+    a lower objective with more failed runs loses to a higher one with fewer, the objective
+    decides between equals (the earliest of equal records), a record with no ok run (NaN)
+    ranks last among those that fail as many runs; brute force over the records' pairs."""
+    nan = float("nan")
+    scored = [(5.0, 2), (9.0, 0), (nan, 0), (8.0, 0), (3.0, 1), (8.0, 0)]
+    history = [dict(step=s, runs=8 * (s + 1), wall_s=1.0 * s) for s in range(8)]
+    for rec, (value, failed) in zip(history[1:], scored, strict=False):
+        rec.update(heldout=value, heldout_failed=failed)
+    result = tune_module.TuneResult(
+        None, None, ["k"], [1.0], [1.0], "miss_rms", "adam", 0, 8, 8, history, None, 0.0, 0.0
+    )
+    records = [h for h in history if "heldout" in h]
+
+    def beats(a, b):  # a ranks strictly before b, by the written rule
+        if a["heldout_failed"] != b["heldout_failed"]:
+            return a["heldout_failed"] < b["heldout_failed"]
+        va = a["heldout"] if a["heldout"] == a["heldout"] else float("inf")
+        vb = b["heldout"] if b["heldout"] == b["heldout"] else float("inf")
+        return va < vb
+
+    first = [a for a in records if not any(beats(b, a) for b in records)][0]
+    assert result.best_heldout() is first and first["step"] == 4  # 8.0, none failed
+    assert result.runs_to_reach(result.best_heldout()) == (40, 4.0)
+    assert dataclasses.replace(result, history=history[:1]).best_heldout() is None
 
 
 def test_a_user_objective_that_takes_runs_tells_padding_from_failed_runs(monkeypatch):
