@@ -109,9 +109,12 @@ def print_reach(results, baseline):
     own = results[baseline].runs_to_reach(target)
     for method, r in results.items():
         reach = r.runs_to_reach(target)
-        best = min(h["heldout"] for h in r.history if h.get("heldout") is not None)
+        best = r.best_heldout()  # fewest failed runs, then the objective
         if reach is None:
-            print(f"  {method}: not reached (best monitored {best:.3f})")
+            print(
+                f"  {method}: not reached (best monitored {best['heldout']:.3f}, "
+                f"{best.get('heldout_failed', 0)} failed)"
+            )
             continue
         ratio = reach[1] / own[1] if own[1] > 0 else float("nan")
         print(f"  {method}: {reach[0]} runs, {reach[1]:.2f} s ({ratio:.2f}x {baseline}'s)")

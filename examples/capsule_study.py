@@ -9,20 +9,19 @@ import jax.numpy as jnp
 import numpy as np
 
 import gnc_jax as gj  # import first: float64 and one XLA device per core
+from gnc_jax.statistics import interval_text
 
 # 1. The packaged seed 003 scenario: 1000 dispersed runs, saved and plotted (Figs. 4-6).
 scenario = gj.load_scenario("lunar-skip-entry")
 study = gj.run_study(scenario, runs=1000, seed=0)
 s = study.summary()
-
-
-def interval(text):  # "lo .. hi", or None: fewer than two ok runs, no spread
-    return "n/a" if text is None else f"{text} km"
-
-
+# a 3σ interval is n/a from fewer than two ok runs (no spread), as is a study with no ok run
+sigma3 = {
+    axis: s.get(f"{axis}_err_km", {}).get("three_sigma") for axis in ("downrange", "crossrange")
+}
 print(
-    f"chute 3σ: downrange {interval(s['downrange_err_km_3sigma'])}, crossrange "
-    f"{interval(s['crossrange_err_km_3sigma'])}; failed {s['failed']}; "
+    f"chute 3σ: downrange {interval_text(sigma3['downrange'], 'km')}, "
+    f"crossrange {interval_text(sigma3['crossrange'], 'km')}; failed {s['failed']}; "
     f"{s['wall_s']:.1f} s for {study.runs} runs after {s['compile_s']:.1f} s compile"
 )
 study.save("results/example-skip-entry", overwrite=True)

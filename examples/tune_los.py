@@ -118,15 +118,14 @@ if "headline" in globals():
                 eval_runs=500,
             )
             runs[method] = r
-            print(method, [(h["runs"], round(h["wall_s"], 1), h.get("heldout")) for h in r.history
-                           if h.get("heldout") is not None], flush=True)  # fmt: skip
-
+            print(method, [(h["runs"], round(h["wall_s"], 1), h["heldout"], h.get("heldout_failed"))
+                           for h in r.history if h.get("heldout") is not None],
+                  flush=True)  # fmt: skip
         # the worse of the methods' best held-out records, ranked as the tuner ranks them
-        def rank(h):
-            return tuning.ranking_key(h["heldout"], h.get("heldout_failed", 0))
-
-        best = [min((h for h in r.history if "heldout" in h), key=rank) for r in runs.values()]
-        target = max(best, key=rank)
+        target = max(
+            (r.best_heldout() for r in runs.values()),
+            key=lambda h: tuning.ranking_key(h["heldout"], h.get("heldout_failed", 0)),
+        )
         for method, r in runs.items():
             reach = r.runs_to_reach(target)
             print(f"{method}: reaches held-out objective {target['heldout']:.5g} "

@@ -49,4 +49,20 @@ def wilson_interval(k: int, n: int, confidence: float = 0.95) -> tuple[float, fl
     return lo, hi
 
 
-__all__ = ["MIN_SPREAD_RUNS", "spread", "std", "wilson_interval"]
+def interval_text(interval, unit: str = "") -> str:
+    """An interval ``(lo, hi)`` as ``[lo, hi] unit``, both ends to the decimals that give its
+    width three significant digits (4 significant digits each where it has no finite width);
+    ``n/a`` for ``None`` (a spread from fewer than :data:`MIN_SPREAD_RUNS` runs)."""
+    if interval is None:
+        return "n/a"
+    lo, hi = (float(x) for x in interval)
+    width = abs(hi - lo)
+    if math.isfinite(width) and width > 0:
+        decimals = max(0, 2 - math.floor(math.log10(width)))
+        text = f"[{lo:.{decimals}f}, {hi:.{decimals}f}]"
+    else:
+        text = f"[{lo:.4g}, {hi:.4g}]"
+    return f"{text} {unit}" if unit else text
+
+
+__all__ = ["MIN_SPREAD_RUNS", "interval_text", "spread", "std", "wilson_interval"]

@@ -117,3 +117,50 @@ def test_the_printed_summary_shows_numbers_not_python_records(kind, capsys):
         assert "{" not in printed and "None" not in printed and "': " not in printed, printed
         assert not re.search(r"\d\.\d{10,}", printed), printed
         assert "platform cpu, device_count 2, memory_gb 25.28" in printed
+
+
+def test_interval_text_gives_the_width_three_significant_digits():
+    """Both ends to the decimals of the width's third significant digit, the unit after."""
+    from gnc_jax.statistics import interval_text
+
+    assert interval_text([-0.8250488439999466, 0.21269251674699735], "km") == "[-0.83, 0.21] km"
+    assert interval_text((7100.3, 7460.9), "m/s") == "[7100, 7461] m/s"
+    assert interval_text((0.20654, 1.0)) == "[0.207, 1.000]"
+    assert interval_text((0.0012344, 0.0015377), "m") == "[0.001234, 0.001538] m"
+    assert interval_text((1.5, 1.5), "km") == "[1.5, 1.5] km"  # no width: 4 significant digits
+    assert interval_text(None, "km") == "n/a"
+
+
+def test_the_printed_intervals_carry_their_units(capsys):
+    """Every interval of a printed capsule summary reads ``[lo, hi] unit`` whether the summary
+    keeps it as numbers or as the paper's ``lo .. hi`` text: the 3σ ends are numpy's mean
+    +- 3 std of the ok runs; the paper table's columns line up; the failed-runs line names
+    the statuses without a Python dict."""
+    from gnc_jax.cli.output import _failed_runs_line, _print_summary
+    from gnc_jax.systems import get_system
+    from gnc_jax.systems.capsule.state import CapsuleOutcome
+
+    o = _outcomes(CapsuleOutcome, 5, np.random.default_rng(2))
+    ok = np.arange(5) >= 2
+    stats = get_system("capsule").statistics(o, ok)
+    paper = {"downrange_err_km_3sigma": "-1.4 .. 1.7", "switch_speed_mps_mean": 7350.0}
+    _print_summary({"scenario": "s", "kind": "capsule", "runs": 5, "failed": 2, **stats,
+                    "paper": paper})  # fmt: skip
+    lines = capsys.readouterr().out.splitlines()
+    shown = {ln.split()[0]: ln.split(None, 1)[1] for ln in lines if ln.startswith("  ") and
+             not ln.startswith("    ") and len(ln.split()) > 1}  # fmt: skip
+    d, v = o["downrange_err_km"][ok], o["switch_speed_mps"][ok]
+    lo, hi = d.mean() - 3 * np.std(d), d.mean() + 3 * np.std(d)
+    assert shown["downrange_err_km_3sigma"] == f"[{lo:.2f}, {hi:.2f}] km"
+    assert shown["downrange_err_km"].endswith(f"three_sigma [{lo:.2f}, {hi:.2f}] km")
+    lo, hi = np.percentile(d, [0.135, 99.865])
+    assert shown["downrange_err_km_central_99_73"] == f"[{lo:.2f}, {hi:.2f}] km"
+    lo, hi = v.mean() - 3 * np.std(v), v.mean() + 3 * np.std(v)
+    decimals = 2 - int(np.floor(np.log10(hi - lo)))
+    assert shown["switch_speed_mps_3sigma"] == f"[{lo:.{decimals}f}, {hi:.{decimals}f}] m/s"
+    table = lines[lines.index("  paper vs gnc_jax:") + 1 :]
+    assert len(table) == 2 and len({len(row) for row in table}) == 1, table
+    assert table[0].startswith("    downrange 3σ (km)  ") and "-1.4 .. 1.7" in table[0]
+    failed = {"runs": 5, "failed": 3, "failed_by_status": {"nan": 2, "time_out": 1}}
+    line = _failed_runs_line(failed, 0.1)
+    assert line == "gnc-jax: 3 of 5 runs failed (nan 2, time_out 1), more than --max-failed 0.1"

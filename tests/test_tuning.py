@@ -10,6 +10,7 @@ The tunings share their shapes (batches of 8 runs; training checks and held-out 
 12 for the weighted objective), so each of the tuner's programs compiles once in this module.
 """
 
+import dataclasses
 import json
 import os
 import pathlib
@@ -715,6 +716,34 @@ def test_the_failed_term_is_the_fraction_of_the_runs_not_ok(monkeypatch):
         parse_objective("miss_rms+failed(2)", scenario)
 
 
+def test_the_best_held_out_record_fails_the_fewest_runs():
+    """``best_heldout`` picks among the ``eval_every`` records as the training check picks:
+    a lower objective with more failed runs loses to a higher one with fewer, the objective
+    decides between equals (the earliest of equal records), a record with no ok run (NaN)
+    ranks last among those that fail as many runs; brute force over the records' pairs."""
+    nan = float("nan")
+    scored = [(5.0, 2), (9.0, 0), (nan, 0), (8.0, 0), (3.0, 1), (8.0, 0)]
+    history = [dict(step=s, runs=8 * (s + 1), wall_s=1.0 * s) for s in range(8)]
+    for rec, (value, failed) in zip(history[1:], scored, strict=False):
+        rec.update(heldout=value, heldout_failed=failed)
+    result = tune_module.TuneResult(
+        None, None, ["k"], [1.0], [1.0], "miss_rms", "adam", 0, 8, 8, history, None, 0.0, 0.0
+    )
+    records = [h for h in history if "heldout" in h]
+
+    def beats(a, b):  # a ranks strictly before b, by the written rule
+        if a["heldout_failed"] != b["heldout_failed"]:
+            return a["heldout_failed"] < b["heldout_failed"]
+        va = a["heldout"] if a["heldout"] == a["heldout"] else float("inf")
+        vb = b["heldout"] if b["heldout"] == b["heldout"] else float("inf")
+        return va < vb
+
+    first = [a for a in records if not any(beats(b, a) for b in records)][0]
+    assert result.best_heldout() is first and first["step"] == 4  # 8.0, none failed
+    assert result.runs_to_reach(result.best_heldout()) == (40, 4.0)
+    assert dataclasses.replace(result, history=history[:1]).best_heldout() is None
+
+
 def test_a_user_objective_that_takes_runs_tells_padding_from_failed_runs(monkeypatch):
     """A callable ``fn(outcomes, weights, runs)`` gets the batch's mask (1: a real run, 0:
     padding) besides the counted runs, so that it can price failures; ``fn(outcomes,
@@ -793,6 +822,56 @@ def test_heldout_table_has_the_failed_fraction_of_every_held_out_run(monkeypatch
     lo, hi = np.quantile(diffs, [0.025, 0.975])
     np.testing.assert_allclose([rows["failed"]["ci_low"], rows["failed"]["ci_high"]], [lo, hi])
     assert "failed" in tune_module.heldout_table(heldout)
+
+
+def test_heldout_table_gives_a_user_objective_that_takes_runs_every_held_out_run(monkeypatch):
+    """A user objective that takes ``runs`` prices failed runs: the held-out table evaluates
+    it on every held-out run with its side's own ok runs as weights (a hand count of each
+    side's failures and mean miss), its interval the bootstrap of those; a two-argument
+    objective stays over the runs ok with both gains."""
+    scenario = toy()
+    (gain,) = resolve_gains(scenario, ["guidance.pn.n"])
+    n = 12
+    ok, failed = int(gj.Status.ok), int(gj.Status.nan)
+    fail = {1.0: np.isin(np.arange(n), [2, 7]), 2.0: np.isin(np.arange(n), [2, 4, 9, 10])}
+    miss = {g: np.random.default_rng(6).uniform(1.0, 50.0, n) * g for g in fail}
+    sides = {g: _toy_outcomes(np.where(fail[g], failed, ok), miss[g]) for g in fail}
+
+    def priced(outcomes, weights, runs):
+        mean = jnp.sum(weights * outcomes.miss_m) / jnp.maximum(jnp.sum(weights), 1.0)
+        return mean + 100.0 * jnp.sum(runs - weights) / jnp.sum(runs)
+
+    def plain(outcomes, weights):
+        return jnp.sum(weights * outcomes.miss_m) / jnp.maximum(jnp.sum(weights), 1.0)
+
+    resamples = 30
+    bootstrap = lambda *a: paired_interval(*a, resamples=resamples)  # noqa: E731
+    monkeypatch.setattr(tune_module.evaluation, "paired_interval", bootstrap)
+    rows = {}
+    for fn in (priced, plain):
+        problem = tune_module.TuningProblem(scenario, [gain], parse_objective(fn, scenario), 0)
+        monkeypatch.setattr(problem, "hard_outcomes", lambda gains, idx: sides[float(gains[0])])
+        heldout = tune_module.evaluate_heldout(problem, [1.0], [2.0], runs=n, chunk=n)
+        assert heldout["failed"] == dict(initial=2, tuned=4)
+        (rows[fn.__name__],) = heldout["rows"]
+
+    def by_hand(g, i, paired=False):
+        keep = ~(fail[1.0] | fail[2.0])[i] if paired else ~fail[g][i]
+        if paired:
+            return miss[g][i][keep].mean()
+        return miss[g][i][keep].mean() + 100.0 * fail[g][i].sum() / len(i)
+
+    every = np.arange(n)
+    for side, g in (("initial", 1.0), ("tuned", 2.0)):
+        np.testing.assert_allclose(rows["priced"][side], by_hand(g, every), rtol=1e-12)
+        np.testing.assert_allclose(rows["plain"][side], by_hand(g, every, True), rtol=1e-12)
+    draws = np.random.default_rng(0)
+    diffs = []
+    for _ in range(resamples):
+        d = draws.integers(0, n, size=n)
+        diffs.append(by_hand(2.0, d) - by_hand(1.0, d))
+    lo, hi = np.quantile(diffs, [0.025, 0.975])
+    np.testing.assert_allclose([rows["priced"]["ci_low"], rows["priced"]["ci_high"]], [lo, hi])
 
 
 def test_auto_gradient_mode_follows_the_number_of_parameters(monkeypatch):

@@ -5,7 +5,7 @@ import sys
 from pathlib import Path
 
 from .exit_codes import EXIT_FAILED_RUNS
-from .output import _print_summary, _print_warnings, _too_many_failed
+from .output import _failed_runs_line, _print_summary, _print_warnings, _too_many_failed
 
 
 def _writable_dir(path) -> bool:
@@ -129,11 +129,7 @@ def cmd_run(args) -> int:
     if args.out:
         print(f"wrote {args.out}/summary.json, {args.out}/runs/ ({study.runs} runs), scenario.toml")
     if _too_many_failed(summary, args.max_failed):
-        print(
-            f"gnc-jax: {summary['failed']} of {summary['runs']} runs failed "
-            f"({summary['failed_by_status']}), more than --max-failed {args.max_failed:g}",
-            file=sys.stderr,
-        )
+        print(_failed_runs_line(summary, args.max_failed), file=sys.stderr)
         return EXIT_FAILED_RUNS
     return 0
 

@@ -99,7 +99,9 @@ def evaluate_heldout(
     Rows: the objective and each of its terms, with the paired difference (tuned - initial)
     and its bootstrap confidence interval over the runs that end ``ok`` with both gains. An
     objective with the ``failed`` term resamples every held-out run instead: that term counts
-    each side's failed runs among them, the others stay over the runs ``ok`` with both.
+    each side's failed runs among them, the others stay over the runs ``ok`` with both. A user
+    objective that takes ``runs`` resamples every held-out run too, each side's weights its
+    own ``ok`` runs (the objective of :func:`hard_scores` on all of them).
     """
     indices = heldout_indices(runs)
     chunk = min(chunk or (problem.system.chunk_per_device or 512) * problem.n_dev, runs)
@@ -117,18 +119,22 @@ def evaluate_heldout(
     paired = (w["initial"] > 0) & (w["tuned"] > 0)
     both = np.flatnonzero(paired)
     objective = problem.objective
-    over_every_run = any(not TERMS[name].over_ok for _, name, _ in objective.terms)
+    # A user objective that takes the runs mask prices failed runs itself: it sees every
+    # held-out run with its side's own ok runs as weights, as the tuner and hard_scores call it.
+    own = objective.takes_runs
+    over_every_run = own or any(not TERMS[name].over_ok for _, name, _ in objective.terms)
     resampled = np.arange(runs) if over_every_run else both
-    counts = paired[resampled].astype(float)  # the runs the terms over ok runs are taken over
+    # the runs the terms over ok runs are taken over: those ok with both gains
+    counts = {s: ((w[s] > 0) if own else paired)[resampled].astype(float) for s in sides}
 
-    def statistic(outcomes, name):
-        drawn = jax.tree_util.tree_map(lambda x: x[resampled], outcomes)
+    def statistic(side, name):
+        drawn = jax.tree_util.tree_map(lambda x: x[resampled], sides[side])
 
         def stat(i):
             sub = jax.tree_util.tree_map(lambda x: x[i], drawn)
             if name == "objective":
-                return float(objective.value(sub, jnp.asarray(counts[i]), None))
-            return objective.term_values(sub, jnp.asarray(counts[i]))[name]
+                return float(objective.value(sub, jnp.asarray(counts[side][i]), None))
+            return objective.term_values(sub, jnp.asarray(counts[side][i]))[name]
 
         return stat
 
@@ -137,7 +143,7 @@ def evaluate_heldout(
         names += [_term_label(n, arg) for _, n, arg in objective.terms]
     rows = []
     for name in names:
-        a, b = statistic(sides["initial"], name), statistic(sides["tuned"], name)
+        a, b = statistic("initial", name), statistic("tuned", name)
         every = np.arange(len(resampled))
         ini, tun = a(every), b(every)
         diff, lo, hi = paired_interval(a, b, len(resampled), confidence)

@@ -180,9 +180,15 @@ class Objective:
     def weights(self):
         return jnp.asarray([w for w, _, _ in self.terms], dtype=jnp.float64)
 
+    @property
+    def takes_runs(self) -> bool:
+        """Whether this is a user callable that takes the ``runs`` mask (and so can count the
+        failed runs itself)."""
+        return self.fn is not None and _takes_runs(self.fn)
+
     def value(self, outcomes, weights, temperature=None, term_weights=None, runs=None):
         if self.fn is not None:
-            if not _takes_runs(self.fn):
+            if not self.takes_runs:
                 return self.fn(outcomes, weights)
             return self.fn(outcomes, weights, runs=jnp.ones_like(weights) if runs is None else runs)
         term_weights = self.weights if term_weights is None else term_weights

@@ -20,7 +20,9 @@ class TuneResult:
         objective: the objective's spec; method: ``"adam"`` or ``"es"``.
         history: one dict per step: ``step``, ``objective`` (training batch; smooth for adam,
             hard for es), ``gains``, ``temperature``, ``runs`` (simulated so far), ``wall_s``
-            (after compilation, evaluations excluded), ``heldout`` where evaluated, and
+            (after compilation, evaluations excluded), ``heldout`` and ``heldout_failed``
+            (the objective and the failed runs on the ``eval_runs`` held-out runs) where
+            evaluated, and
             ``nonfinite_gradient`` (adam) where that many gradient components were not finite
             and were taken as 0.
         heldout: the paired held-out evaluation (:func:`evaluate_heldout`), or ``None``.
@@ -52,6 +54,15 @@ class TuneResult:
     @property
     def tuned_gains(self) -> dict[str, float]:
         return dict(zip(self.names, self.tuned, strict=True))
+
+    def best_heldout(self) -> dict | None:
+        """The ``eval_every`` held-out record that ranks first (``None`` without one), ranked
+        as the tuner's checks rank (:func:`~.evaluation.ranking_key`): fewest failed runs, then
+        the lowest objective, the earliest of equal records; the objective alone could pick a
+        record that fails more runs. A target for :meth:`runs_to_reach`."""
+        records = [h for h in self.history if h.get("heldout") is not None]
+        rank = lambda h: ranking_key(h["heldout"], h.get("heldout_failed", 0))
+        return min(records, key=rank, default=None)
 
     def runs_to_reach(self, target: float | dict, failed: int = 0):
         """``(runs, wall_s)`` at the first held-out evaluation that ranks no worse than the

@@ -70,7 +70,9 @@ def tune(
         objective: built-in terms (:data:`TERMS`, e.g. ``"miss_rms+10*dv_mean"``), a mapping
             ``{term: weight}``, a callable ``fn(outcomes, weights)`` of the per-run outcomes
             (a NamedTuple of arrays, run on the first axis; weights 1 for ``ok`` runs, 0
-            else), or ``None``: the system's ``smooth_objective``.
+            for the failed runs and the batch's padding) or ``fn(outcomes, weights, runs)``
+            (``runs`` 1 for the batch's runs, 0 for its padding: ``runs - weights`` marks the
+            failed runs), or ``None``: the system's ``smooth_objective``.
         batch: runs per step; steps: optimiser steps; seed: root seed of the run keys.
         method: ``"adam"`` (gradients through the relaxed laws), ``"es"`` (gradient-free
             antithetic evolution strategy on the hard logic, same runs per step) or

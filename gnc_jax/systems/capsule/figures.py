@@ -10,6 +10,7 @@ import numpy as np
 from ..._status import Status
 from ...params import from_scenario
 from ...plotting import ellipse_xy, pyplot, saver
+from ...statistics import interval_text
 from .params import CapsuleDispersions
 
 
@@ -46,10 +47,13 @@ def _chute_scatter(plt, summary, scenario, dr, cr):
         pass
     ax.set_xlabel("crossrange error (km, > 0 left)")
     ax.set_ylabel("downrange error (km, > 0 overshoot)")
+    sigma3 = {
+        a: summary.get(f"{a}_err_km", {}).get("three_sigma") for a in ("downrange", "crossrange")
+    }
     ax.set_title(
         f"{scenario.name}: chute deploy (seed 003 Fig. 6)\n"
-        f"3σ downrange {summary.get('downrange_err_km_3sigma') or 'n/a'}, "
-        f"crossrange {summary.get('crossrange_err_km_3sigma') or 'n/a'} km"
+        f"3σ downrange {interval_text(sigma3['downrange'], 'km')}, "
+        f"crossrange {interval_text(sigma3['crossrange'], 'km')}"
     )
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(alpha=0.3)
