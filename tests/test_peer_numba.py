@@ -53,7 +53,9 @@ def fed(scenario):
     """gnc_jax's outcomes of RUNS runs, their normals, and the peer's outcomes fed them."""
     ref = gj.run_study(scenario, runs=RUNS, seed=3, progress=False).outcomes
     sim, _ = gj.build(scenario)
-    draws = peer.gnc_jax_draws(sim, RUNS, seed=3)
+    # Writable copies (numba types a read-only array, as numpy views of JAX arrays are, apart):
+    # the rolled draws below are writable too, so one compilation of the kernel serves both.
+    draws = tuple(np.array(a) for a in peer.gnc_jax_draws(sim, RUNS, seed=3))
     return ref, draws, peer.run_fed(scenario, *draws)
 
 
