@@ -58,6 +58,25 @@ BAD_INPUT = [
         "dynamics.sun_direction: [0.0, 0.0, 0.0] has length 0; allowed: a direction",
     ),
 ]
+BAD_INPUT.append(
+    (
+        ["run", "deep-impact-los", "--set", "approach.velocity_kmps=[10.2,0.0,0.0]"],
+        "approach.velocity_kmps: the impactor must approach the target; allowed",
+    )
+)
+BAD_INPUT.append(
+    (
+        [
+            "run",
+            "lunar-skip-entry",
+            "--set",
+            "guidance.skip_entry.bank_min_deg=170",
+            "--set",
+            "guidance.skip_entry.bank_max_deg=10",
+        ],
+        "guidance.skip_entry.bank_min_deg: 170 deg; allowed: below",
+    )
+)
 APN = "bennu-apn"
 BAD_INPUT += [
     (
