@@ -23,7 +23,8 @@ class Status(enum.IntEnum):
     nav_lost = 7  # navigation lost the target (most images unused, or innovations persistently
     # beyond their covariance: see gnc_jax.navigation.ekf.NAV_LOST_*)
     missed = 8  # the run ended outside its delivery tolerance (capsule: a chute point beyond
-    # simulation.miss_limit_km)
+    # simulation.miss_limit_km; impactor and intercept: a B-plane miss beyond
+    # guidance.miss_limit_km)
 
     @classmethod
     def name_of(cls, code: int) -> str:

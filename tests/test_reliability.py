@@ -423,3 +423,15 @@ def test_a_report_draws_its_first_ok_run_as_the_example():
     assert shown_run(np.array([failed, failed, ok, ok])) == (2, "run 2")
     assert shown_run(np.array([ok, failed])) == (0, "run 0")
     assert shown_run(np.array([failed, int(Status.nan)])) == (0, "run 0 (propellant)")
+
+
+@pytest.mark.parametrize("name", ["deep-impact-los", "bennu-apn"])
+def test_a_report_traces_the_first_ok_run_of_a_study_whose_first_run_failed(name):
+    """The example run a report simulates again (the impactor's engine trace and frames, the
+    intercept's command trace) is the first ok run, not run 0 when run 0 failed."""
+    from gnc_jax._status import Status
+
+    scenario = gj.load_scenario(name)
+    runs = {"status": np.array([int(Status.propellant), int(Status.missed), int(Status.ok)])}
+    requests = gj.get_system(scenario.kind).figure_traces({}, runs, scenario)
+    assert requests["shown"].indices == (2,)

@@ -2,7 +2,9 @@
 
 import json
 import math
+import os
 import pathlib
+import sys
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -56,6 +58,25 @@ BAD_INPUT = [
         "dynamics.sun_direction: [0.0, 0.0, 0.0] has length 0; allowed: a direction",
     ),
 ]
+BAD_INPUT.append(
+    (
+        ["run", "deep-impact-los", "--set", "approach.velocity_kmps=[10.2,0.0,0.0]"],
+        "approach.velocity_kmps: the impactor must approach the target; allowed",
+    )
+)
+BAD_INPUT.append(
+    (
+        [
+            "run",
+            "lunar-skip-entry",
+            "--set",
+            "guidance.skip_entry.bank_min_deg=170",
+            "--set",
+            "guidance.skip_entry.bank_max_deg=10",
+        ],
+        "guidance.skip_entry.bank_min_deg: 170 deg; allowed: below",
+    )
+)
 APN = "bennu-apn"
 BAD_INPUT += [
     (
@@ -414,6 +435,45 @@ def test_output_piped_to_a_reader_that_stops_is_no_error(monkeypatch, capsys):
     monkeypatch.setattr(cli, "build_parser", lambda: _Fixed(args, closed))
     assert cli.main(["list"]) == 0
     assert "internal error" not in capsys.readouterr().err
+
+
+def test_a_failed_study_piped_to_a_reader_that_stops_still_exits_3(tmp_path, monkeypatch):
+    # `gnc-jax run ... | head -3`: the summary's lines after the reader stopped are dropped,
+    # and the study's runs that failed still decide the exit code
+    system = gj.get_system("toy-intercept")
+
+    class AlwaysNaN(type(system)):
+        def simulate(self, params, law, key, record=False):
+            out, trace = super().simulate(params, law, key, record)
+            return out._replace(miss_m=out.miss_m * float("nan")), trace
+
+    class ClosedPipe:
+        lines = 0
+        fd = os.open(os.devnull, os.O_WRONLY)  # where the command sends the rest
+
+        def fileno(self):
+            return self.fd
+
+        def write(self, text):
+            self.lines += text.count("\n")
+            if self.lines > 3:
+                raise BrokenPipeError(32, "Broken pipe")
+            return len(text)
+
+        def flush(self):
+            pass
+
+    monkeypatch.setattr(montecarlo, "get_system", lambda kind: AlwaysNaN())
+    monkeypatch.setattr(study_module, "get_system", lambda kind: AlwaysNaN())
+    monkeypatch.setattr(sys, "stdout", ClosedPipe())
+    toy = pathlib.Path(__file__).with_name("toy.toml")
+    out = tmp_path / "toy"
+    try:
+        code = cli.main(["run", str(toy), "--runs", "4", "--out", str(out), "--no-progress"])
+    finally:
+        os.close(ClosedPipe.fd)
+    assert code == 3
+    assert json.loads((out / "summary.json").read_text())["failed"] == 4
 
 
 class _Fixed:

@@ -26,6 +26,37 @@ from .output import _print_warnings
 from .parser import build_parser
 
 
+class _UntilThePipeCloses:
+    """``sys.stdout`` while a command runs: once the reader of a pipe has stopped (``| head``)
+    the rest of the output is dropped and the command carries on to its own exit code, so
+    that a study whose runs failed still exits 3 however its summary was read."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def write(self, text):
+        try:
+            return self._stream.write(text)
+        except BrokenPipeError:
+            self._drop()
+            return len(text)
+
+    def flush(self):
+        try:
+            self._stream.flush()
+        except BrokenPipeError:
+            self._drop()
+
+    def _drop(self):
+        try:  # the stream's own flush (at exit too) then writes to nothing
+            os.dup2(os.open(os.devnull, os.O_WRONLY), self._stream.fileno())
+        except (OSError, ValueError, AttributeError):
+            self._stream = open(os.devnull, "w")  # noqa: SIM115  (lives as long as stdout)
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     import gnc_jax  # noqa: F401  (float64 and host devices before JAX starts)
@@ -34,6 +65,7 @@ def main(argv=None) -> int:
     from ..scenario import ScenarioError
     from ..study import StudyError
 
+    stdout, sys.stdout = sys.stdout, _UntilThePipeCloses(sys.stdout)
     try:
         return args.func(args)
     except (ScenarioError, ResultsError) as e:
@@ -63,6 +95,8 @@ def main(argv=None) -> int:
             file=sys.stderr,
         )
         return EXIT_INTERNAL
+    finally:
+        sys.stdout = stdout
 
 
 __all__ = [

@@ -406,7 +406,8 @@ class SkipEntryParameters(AbstractEntryGuidance):
         check_schedules(section, cls.schedule_breakpoints, cls.schedules, "guidance.skip_entry")
         if section["bank_min_deg"] >= section["bank_max_deg"]:
             raise ScenarioError(
-                "guidance.skip_entry.bank_min_deg: must be < guidance.skip_entry.bank_max_deg"
+                f"guidance.skip_entry.bank_min_deg: {section['bank_min_deg']:g} deg; allowed: "
+                f"below guidance.skip_entry.bank_max_deg = {section['bank_max_deg']:g} deg"
             )
         if section["predictor_coast_load_g"] >= section["kepler_load_g"]:
             # the switch point (the load rising through kepler_load_g) is located in a step

@@ -82,6 +82,7 @@ def build(scenario) -> ImpactorSimulation:
         engine=engine,
         mass_kg=sc.mass_kg,
         propellant_kg=sc.propellant_kg,
+        miss_limit_m=g.miss_limit_m,
         errors=p.errors,
         noise_model=noise_model(p),
         focal_length_m=p.camera.focal_length_m,

@@ -23,6 +23,7 @@ from ...guidance.impactor.base import mission_time_s, nominal_time_of_flight_s
 from ...navigation.camera import small_rotation
 from ...navigation.render import CameraModel, TargetModel
 from ...params import from_scenario, param
+from ..impact import MISS_LIMIT_DOC
 from .errors import UG, URAD, ImpactorErrors
 from .schema import MAX_TIDE_RATIO, MIN_RANGE_RADII, MIN_SPEED_KMPS, MIN_SUN_AU, guided_loop
 
@@ -339,9 +340,10 @@ class NavigationParams(eqx.Module):
 
 
 class GuidanceTiming(eqx.Module):
-    """The system-level guidance fields: control step, aim points and the times to go of the
-    retarget and the cut-off (SI). The law's own gains are its ``[guidance.<law>]`` table.
-    The times are Python floats: they set loop sizes and scheduled events."""
+    """The system-level guidance fields: control step, aim points, the times to go of the
+    retarget and the cut-off, and the delivery tolerance (SI). The law's own gains are its
+    ``[guidance.<law>]`` table. The times are Python floats: they set loop sizes and scheduled
+    events."""
 
     dt_s: float = param(
         1.0,
@@ -388,6 +390,17 @@ class GuidanceTiming(eqx.Module):
         units="s",
         doc="no burn in the last cutoff_tgo_s before the nominal impact; the control step "
         "that starts before the cut-off must end by the nominal impact",
+    )
+    miss_limit_m: Scalar = param(
+        10.0,
+        toml="miss_limit_km",
+        section="guidance",
+        scale=1e3,
+        lo=0.0,
+        lo_open=True,
+        hi=1e7,
+        units="km",
+        doc=MISS_LIMIT_DOC,
     )
 
 

@@ -130,8 +130,8 @@ def _check_approach(cfg: dict) -> tuple[float, float]:
     tof = time_of_flight_s(cfg)
     if tof <= 0.0:
         raise ScenarioError(
-            "approach.velocity_kmps: the impactor must approach the target "
-            "(position . velocity < 0)"
+            "approach.velocity_kmps: the impactor must approach the target; allowed: a "
+            "velocity with approach.position_km . approach.velocity_kmps < 0"
         )
     if tof > MAX_TOF_S:
         raise ScenarioError(

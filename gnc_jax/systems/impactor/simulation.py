@@ -158,9 +158,14 @@ def finish(
         silhouette_ratio=silhouette_ratio(b, _silhouette(sim), _focusing(sim)),
         innovations_outside=tally.innovations_outside,
     )
-    # A run whose navigation was lost ends nav_lost, ahead of what it then does to its fuel.
+    # A run whose navigation was lost ends nav_lost, ahead of what it then does to its fuel and
+    # its miss; a run out of propellant reads so ahead of the miss that follows from it.
     lost = navigation_lost(sim.n_images, tally.images_used, tally.innovations_outside)
-    failures = ((lost, Status.nav_lost), (outcome.fuel_kg > sim.propellant_kg, Status.propellant))
+    failures = (
+        (lost, Status.nav_lost),
+        (outcome.fuel_kg > sim.propellant_kg, Status.propellant),
+        (outcome.miss_m > sim.miss_limit_m, Status.missed),
+    )
     return with_status(outcome, failures)
 
 

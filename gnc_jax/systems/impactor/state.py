@@ -35,6 +35,7 @@ class ImpactorSimulation(eqx.Module):
         context: on-board mission data (B-plane frame, aim points, engine, timing).
         dynamics: true differential gravity; engine: true nominal engine; mass_kg: initial mass;
         propellant_kg: usable propellant (a run that burns more is flagged ``propellant``).
+        miss_limit_m: delivery tolerance (a run whose B-plane miss is larger reads ``missed``).
         errors: 1-sigma error sources of the truth (what the draws scale).
         noise_model: the error sources as the filter models them (measurement noise, the
             accelerometer's Δv error, the attitude-bias consider term): ``errors`` with the
@@ -66,6 +67,7 @@ class ImpactorSimulation(eqx.Module):
     engine: Engine
     mass_kg: Scalar
     propellant_kg: Scalar
+    miss_limit_m: Scalar
     errors: ImpactorErrors
     noise_model: ImpactorErrors
     focal_length_m: Scalar

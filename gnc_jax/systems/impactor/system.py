@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._numerics import LoopShape
-from ..._status import Status
+from ..._status import Status, shown_run
 from ...geometry.ellipse import ellipse_probability
 from ...guidance.impactor.base import AbstractImpactorGuidance
 from ...navigation.camera import camera_attitude, los_angles
@@ -114,9 +114,9 @@ def _dv_and_firings(plt, summary, runs, ok, scenario):
     return fig
 
 
-def _engine_trace(plt, trace, scenario, law):
-    """Run 0's engine against the law's own curves (for the LOS law its switching curves,
-    seed 000 Fig. 3), as the law states them (``state_curves``)."""
+def _engine_trace(plt, trace, scenario, law, shown):
+    """The engine of the run ``shown`` names against the law's own curves (for the LOS law its
+    switching curves, seed 000 Fig. 3), as the law states them (``state_curves``)."""
     t = trace.t_s
     fig, ax = plt.subplots(figsize=(9, 4.5))
     curves = law.state_curves(trace.law_state)
@@ -127,10 +127,10 @@ def _engine_trace(plt, trace, scenario, law):
         ax.set_ylabel("law state")
         lo = np.nanmin(np.where(first > 0, first, np.nan))
         ax.set_ylim(max(lo, 1e-12), None)
-        title = f"the law's curves ({law.describe()}), run 0"
+        title = f"the law's curves ({law.describe()}), {shown}"
     else:
         ax.set_ylabel("throttle")
-        title = "burns of the predictive law, run 0"
+        title = f"burns of the predictive law, {shown}"
     ax2 = ax.twinx()
     ax2.fill_between(t, 0, trace.throttle, step="post", color="C3", alpha=0.3, label="engine")
     ax2.set_ylim(0, 4)
@@ -146,25 +146,28 @@ def _engine_trace(plt, trace, scenario, law):
 
 
 def impactor_figures(summary, runs, scenario, out: pathlib.Path, traces) -> list[pathlib.Path]:
-    """B-plane impact points with 1σ/3σ ellipses, Δv and firings, run 0's engine trace
-    (seed 000 Fig. 3 for the LOS law) and rendered frames (seed 002 Fig. 7)."""
+    """B-plane impact points with 1σ/3σ ellipses, Δv and firings, and the engine trace (seed
+    000 Fig. 3 for the LOS law) and rendered frames (seed 002 Fig. 7) of the study's first
+    ``ok`` run (:func:`~gnc_jax._status.shown_run`)."""
     plt = pyplot()
     ok = runs["status"] == Status.ok
     files = []
     save = saver(plt, out, files)
     save(_b_plane_points(plt, summary, runs, ok, scenario), "b_plane.png")
     save(_dv_and_firings(plt, summary, runs, ok, scenario), "dv_firings.png")
-    _, trace = traces["run0"]
+    _, trace = traces["shown"]
+    label = shown_run(runs["status"])[1]
     _, law = ImpactorSystem().build(scenario)
-    save(_engine_trace(plt, trace, scenario, law), "engine_trace.png")
-    files.append(_centroid_frames_figure(scenario, trace, out))
+    save(_engine_trace(plt, trace, scenario, law, label), "engine_trace.png")
+    files.append(_centroid_frames_figure(scenario, trace, out, label))
     return files
 
 
-def _centroid_frames_figure(scenario, trace, out: pathlib.Path) -> pathlib.Path:
-    """Seed 002 Fig. 7: rendered frames of run 0 with the extracted centroid marked.
+def _centroid_frames_figure(scenario, trace, out: pathlib.Path, label: str) -> pathlib.Path:
+    """Seed 002 Fig. 7: rendered frames of the run ``label`` names with the extracted centroid
+    marked.
 
-    Frames at four mission times along run 0's true trajectory, rendered by the image front
+    Frames at four mission times along that run's true trajectory, rendered by the image front
     end with the scenario's camera and target (camera pointed at the navigation estimate, no
     attitude error, binning for the filter's measurement noise ``navigation.model_*``),
     centroided by the seed 002 pipeline. Shown for every impactor study: with
@@ -206,7 +209,9 @@ def _centroid_frames_figure(scenario, trace, out: pathlib.Path) -> pathlib.Path:
         ax.set_xticks([])
         ax.set_yticks([])
     axes[0].legend(loc="upper left", fontsize=7)
-    fig.suptitle(f"{scenario.name}: rendered ROI frames and extracted centroids (seed 002 Fig. 7)")
+    fig.suptitle(
+        f"{scenario.name}, {label}: rendered ROI frames and extracted centroids (seed 002 Fig. 7)"
+    )
     path = out / "centroid_frames.png"
     fig.savefig(path, dpi=120, bbox_inches="tight")
     plt.close(fig)
@@ -339,7 +344,7 @@ class ImpactorSystem(AbstractSystem):
         return _impactor_statistics(outcomes, ok)
 
     def figure_traces(self, summary, runs, scenario):
-        return {"run0": TraceRequest((0,), single=True)}
+        return {"shown": TraceRequest((shown_run(runs["status"])[0],), single=True)}
 
     def figures(self, summary, runs, scenario, out, traces=None):
         return impactor_figures(summary, runs, scenario, out, traces)

@@ -110,6 +110,7 @@ def build(scenario) -> PNSimulation:
         dynamics=dynamics,
         engine=engine,
         propellant_kg=sc.propellant_kg,
+        miss_limit_m=g.miss_limit_m,
         errors=p.errors,
         process_noise_m2s3=nv.process_noise_m2s3,
         model_attitude_rad=(

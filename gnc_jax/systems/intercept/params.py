@@ -19,6 +19,7 @@ import numpy as np
 from ..._types import Array, Float, Scalar, Vector3
 from ...constants import AU_M
 from ...params import from_scenario, param
+from ..impact import MISS_LIMIT_DOC
 
 _DEG = np.pi / 180.0  # as the conversion was always written (not math.radians: other bits)
 
@@ -136,7 +137,8 @@ class Spacecraft(eqx.Module):
 
 class Guidance(eqx.Module):
     """``[guidance]`` (the system's; the law's gains are in ``[guidance.<law>]``). Static: the
-    times size the loops (:func:`gnc_jax.systems.intercept.build.loop_sizes`)."""
+    times size the loops (:func:`gnc_jax.systems.intercept.build.loop_sizes`). The delivery
+    tolerance ``miss_limit_m`` is what a run's status is judged by."""
 
     coast_s: float = _guidance(
         600.0,
@@ -151,6 +153,16 @@ class Guidance(eqx.Module):
     )
     coast_steps: int = _guidance(
         60, lo=1, hi=100000, doc="RK4 steps of the final unpowered coast to the B-plane"
+    )
+    miss_limit_m: Scalar = _guidance(
+        10.0,
+        toml="miss_limit_km",
+        scale=1e3,
+        lo=0.0,
+        lo_open=True,
+        hi=1e7,
+        units="km",
+        doc=MISS_LIMIT_DOC,
     )
 
 

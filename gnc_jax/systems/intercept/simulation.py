@@ -138,7 +138,8 @@ def finish(
     """The coast to the B-plane and the outcome: ``nan`` when a field is not finite, else
     ``out_of_domain`` when the B-plane miss exceeds the initial range (the run ends farther
     from the target than it started: no intercept), ``time_out`` when the B-plane is not
-    reached ahead, ``propellant`` when the run burned more than ``sim.propellant_kg``."""
+    reached ahead, ``propellant`` when the run burned more than ``sim.propellant_kg``,
+    ``missed`` when the miss exceeds ``sim.miss_limit_m``, the delivery tolerance."""
     truth, tally = state.truth, state.tally
     b, t_rest = coast_to_b_plane(sim.dynamics, truth, sim.c_bi, sim.coast_steps)
     nav_r = truth.r if sim.nav_model == "perfect" else state.estimate.r_hat
@@ -169,6 +170,7 @@ def finish(
         (outcome.miss_m > sim.context.range0_m, Status.out_of_domain),
         (~(t_rest > 0.0), Status.time_out),
         (outcome.fuel_kg > sim.propellant_kg, Status.propellant),
+        (outcome.miss_m > sim.miss_limit_m, Status.missed),
     )
     return with_status(outcome, failures)
 

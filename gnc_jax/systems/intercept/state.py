@@ -23,6 +23,7 @@ class PNSimulation(eqx.Module):
         y0: nominal initial truth (target heliocentric, impactor relative, mass).
         context: on-board data of the law; dynamics: true force model; engine: true engine.
         propellant_kg: usable propellant (a run that burns more is flagged ``propellant``).
+        miss_limit_m: delivery tolerance (a run whose B-plane miss is larger reads ``missed``).
         errors: 1-sigma error sources; process_noise_m2s3: filter white-acceleration density.
         model_attitude_rad: the LOS angle noise the filter assumes (``errors.attitude_rad``
             unless ``navigation.model_attitude_urad`` is set).
@@ -39,6 +40,7 @@ class PNSimulation(eqx.Module):
     dynamics: InterceptDynamics
     engine: Engine
     propellant_kg: Scalar
+    miss_limit_m: Scalar
     errors: PNErrors
     process_noise_m2s3: Scalar
     model_attitude_rad: Scalar

@@ -4,6 +4,7 @@ Batching, chunking, failed-run accounting, gradients and recompilation are check
 system and law by tests/test_family.py.
 """
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -62,6 +63,32 @@ def test_a_perfect_sensor_keeps_navigation(short_scenario):
     s = study.summary()
     assert s["miss_max_m"] < (1.0 if short_scenario.name == "deep-impact-predictive" else 50.0)
     assert s["dv_max_mps"] < 20.0 and s["firings_max"] <= 8
+
+
+def test_a_miss_beyond_the_delivery_tolerance_reads_missed():
+    """A run whose B-plane point lies farther from the aim point than ``guidance.miss_limit_km``
+    reads ``missed`` (an engine too weak to steer, 0.001 N, missed Tempel 1 by 13-20 km and
+    read ``ok``). The unguided short approach (its state at the start, coasted to the B-plane)
+    misses the aim point by the delivery error plus the 3.2 km retarget: ``missed`` under a
+    tolerance below that miss, ``ok`` above it."""
+    import equinox as eqx
+
+    from gnc_jax.systems.impactor.simulation import finish, start
+
+    outcome = eqx.filter_jit(finish)
+    key = gj.run_key(0, 0)
+    sc = gj.load_scenario("deep-impact-los", overrides=SHORT)
+    sim, law = gj.build(sc)
+    state, draws = start(sim, law, key)
+    used = jnp.asarray(sim.n_images, jnp.int32)  # every image navigated: not nav_lost
+    state = state._replace(tally=state.tally._replace(images_used=used))
+    miss_km = float(outcome(sim, law, key, draws, state).miss_m) / 1e3
+    assert miss_km > 1.0
+    for limit_km, status in ((0.5 * miss_km, gj.Status.missed), (2.0 * miss_km, gj.Status.ok)):
+        sim, law = gj.build(sc.with_overrides([f"guidance.miss_limit_km={limit_km}"]))
+        out = outcome(sim, law, key, draws, state)
+        assert float(out.miss_m) / 1e3 == miss_km
+        assert int(out.status) == status, gj.Status.name_of(int(out.status))
 
 
 def test_an_image_interval_that_does_not_divide_the_arc_ends_the_loop_at_the_cutoff():

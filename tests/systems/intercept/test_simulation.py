@@ -173,12 +173,16 @@ def test_reverse_mode_through_the_checkpointed_loop_matches_forward_mode():
 def test_a_run_out_of_its_domain_or_beyond_its_propellant_is_flagged():
     """The final coast and outcome of a loop state: a B-plane miss beyond the initial range is
     ``out_of_domain``, more fuel burned than ``spacecraft.propellant_kg`` is ``propellant``,
-    and the unguided approach itself (10 km off) is ``ok``."""
+    and the unguided approach itself (10 km off) is ``ok`` under a delivery tolerance wider
+    than that."""
     import equinox as eqx
 
     from gnc_jax.systems.intercept.simulation import finish, start
 
-    scenario = gj.load_scenario("bennu-apn", overrides=SHORT + ["navigation.model=perfect"])
+    scenario = gj.load_scenario(
+        "bennu-apn",
+        overrides=SHORT + ["navigation.model=perfect", "guidance.miss_limit_km=1e7"],
+    )
     sim, law = gj.build(scenario)
     key = gj.run_key(0, 0)
     state, draws = start(sim, law, key)
@@ -198,3 +202,29 @@ def test_a_run_out_of_its_domain_or_beyond_its_propellant_is_flagged():
         assert int(out.status) == status, gj.Status.name_of(int(out.status))
         assert (float(out.miss_m) > range0) == (status == gj.Status.out_of_domain)
         assert (float(out.fuel_kg) > propellant) == (status == gj.Status.propellant)
+
+
+def test_a_miss_beyond_the_delivery_tolerance_reads_missed():
+    """A run that ends farther from the target than ``guidance.miss_limit_km`` reads
+    ``missed`` (an engine that never steers still reaches the B-plane, 1000 km off at Bennu,
+    and read ``ok``): the unguided approach, 10 km off, is ``missed`` under a 5 km tolerance
+    and ``ok`` under a 20 km one, the miss itself the same."""
+    import equinox as eqx
+
+    from gnc_jax.systems.intercept.simulation import finish, start
+
+    outcome = eqx.filter_jit(finish)
+    misses = {}
+    for limit_km, status in ((5.0, gj.Status.missed), (20.0, gj.Status.ok)):
+        scenario = gj.load_scenario(
+            "bennu-apn",
+            overrides=SHORT + ["navigation.model=perfect", f"guidance.miss_limit_km={limit_km}"],
+        )
+        sim, law = gj.build(scenario)
+        key = gj.run_key(0, 0)
+        state, draws = start(sim, law, key)
+        out = outcome(sim, law, key, draws, state)
+        misses[limit_km] = float(out.miss_m)
+        assert 5e3 < misses[limit_km] < 20e3
+        assert int(out.status) == status, gj.Status.name_of(int(out.status))
+    assert misses[5.0] == misses[20.0]
