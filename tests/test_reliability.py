@@ -137,8 +137,9 @@ def test_a_slow_far_approach_is_refused_by_its_time_of_flight(capsys, monkeypatc
     argv = ["run", "deep-impact-los", "--set", "approach.position_km=[1e7,0,0]"]
     argv += ["--set", "approach.velocity_kmps=[-1,0,0]"]
     assert "time of flight 116 days" in refused(argv, capsys, monkeypatch)
-    # a start too close: the cut-off's bound names the fields the time of flight comes from
-    err = refused(["run", "deep-impact-los", "--set", "approach.position_km=[7,0,0]"], capsys,
+    # a start too close (9 km, beyond two of Tempel 1's 3.8 km radii): the cut-off's bound names
+    # the fields the time of flight comes from
+    err = refused(["run", "deep-impact-los", "--set", "approach.position_km=[9,0,0]"], capsys,
                   monkeypatch)  # fmt: skip
     assert "the time of flight of approach.position_km at approach.velocity_kmps" in err
 
