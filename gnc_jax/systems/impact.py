@@ -7,6 +7,7 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
+from ..params import param
 from ..statistics import std, wilson_interval
 
 
@@ -35,14 +36,28 @@ def impact_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any
     )
 
 
-MISS_LIMIT_DOC = (
-    "delivery tolerance: a run whose B-plane point lies farther than this from the aim point "
-    "(an intercept's: the target's centre) reads missed and is left out of the statistics. "
-    "The default lies well outside a guided run's scatter (the packaged studies' largest "
-    "miss is about 0.3 km), so that it flags a run that failed (an engine too weak to steer, "
-    "a trigger that never fires: misses of 10 to 1000 km) without truncating the statistics; "
-    "a target whose silhouette reaches beyond it needs a larger one"
-)
+def miss_limit_param():
+    """The ``guidance.miss_limit_km`` field of a B-plane system (the impactor, the intercept):
+    its delivery tolerance, in metres once read."""
+    return param(
+        10.0,
+        toml="miss_limit_km",
+        section="guidance",
+        scale=1e3,
+        lo=0.0,
+        lo_open=True,
+        hi=1e7,
+        units="km",
+        doc=(
+            "delivery tolerance: a run whose B-plane point lies farther than this from the aim "
+            "point (an intercept's: the target's centre) reads missed and is left out of the "
+            "statistics. The default lies well outside a guided run's scatter (the packaged "
+            "studies' largest miss is about 0.3 km), so that it flags a run that failed (an "
+            "engine too weak to steer, a trigger that never fires: misses of 10 to 1000 km) "
+            "without truncating the statistics; a target whose silhouette reaches beyond it "
+            "needs a larger one"
+        ),
+    )
 
 
 HIT_RULE = (

@@ -23,7 +23,7 @@ from ...guidance.impactor.base import mission_time_s, nominal_time_of_flight_s
 from ...navigation.camera import small_rotation
 from ...navigation.render import CameraModel, TargetModel
 from ...params import from_scenario, param
-from ..impact import MISS_LIMIT_DOC
+from ..impact import miss_limit_param
 from .errors import UG, URAD, ImpactorErrors
 from .schema import MAX_TIDE_RATIO, MIN_RANGE_RADII, MIN_SPEED_KMPS, MIN_SUN_AU, guided_loop
 
@@ -391,17 +391,7 @@ class GuidanceTiming(eqx.Module):
         doc="no burn in the last cutoff_tgo_s before the nominal impact; the control step "
         "that starts before the cut-off must end by the nominal impact",
     )
-    miss_limit_m: Scalar = param(
-        10.0,
-        toml="miss_limit_km",
-        section="guidance",
-        scale=1e3,
-        lo=0.0,
-        lo_open=True,
-        hi=1e7,
-        units="km",
-        doc=MISS_LIMIT_DOC,
-    )
+    miss_limit_m: Scalar = miss_limit_param()
 
 
 class ImpactorParams(NamedTuple):

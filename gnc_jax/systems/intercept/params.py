@@ -19,7 +19,7 @@ import numpy as np
 from ..._types import Array, Float, Scalar, Vector3
 from ...constants import AU_M
 from ...params import from_scenario, param
-from ..impact import MISS_LIMIT_DOC
+from ..impact import miss_limit_param
 
 _DEG = np.pi / 180.0  # as the conversion was always written (not math.radians: other bits)
 
@@ -154,16 +154,7 @@ class Guidance(eqx.Module):
     coast_steps: int = _guidance(
         60, lo=1, hi=100000, doc="RK4 steps of the final unpowered coast to the B-plane"
     )
-    miss_limit_m: Scalar = _guidance(
-        10.0,
-        toml="miss_limit_km",
-        scale=1e3,
-        lo=0.0,
-        lo_open=True,
-        hi=1e7,
-        units="km",
-        doc=MISS_LIMIT_DOC,
-    )
+    miss_limit_m: Scalar = miss_limit_param()
 
 
 class Navigation(eqx.Module):
