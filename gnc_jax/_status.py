@@ -13,7 +13,8 @@ class Status(enum.IntEnum):
     ok = 0
     nan = 1  # the state or an outcome became NaN or infinite
     skip_out = 2  # capsule: skipped out of the atmosphere
-    no_convergence = 3  # an iteration (corrector, targeter) did not converge
+    no_convergence = 3  # an iteration (corrector, targeter, a predictive burn's Newton solve)
+    # did not converge
     time_out = 4  # the run did not reach its terminal condition in the allotted time
     out_of_domain = 5  # the state left the model's domain (intercept: a B-plane miss larger
     # than the initial range, a run that ends farther from the target than it started;

@@ -58,6 +58,12 @@ class AbstractGuidanceLaw(eqx.Module):
     @abc.abstractmethod
     def step(self, state, nav, t, ctx): ...
 
+    def converged(self, state):
+        """False when an iteration of the law's own (a burn's Newton solve) ended outside its
+        tolerance in this run: the run then ends ``no_convergence``. ``state``: the law's state
+        at the run's end. Default: true (a law that solves nothing)."""
+        return jnp.asarray(True)
+
     # ---- what the figures and reports draw: the law says it, nobody reads its fields ----
     def describe(self) -> str:
         """One line naming the law and its gains, for figure titles."""

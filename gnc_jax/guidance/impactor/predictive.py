@@ -36,6 +36,7 @@ class PredictiveGuidanceState(NamedTuple):
     mass_kg: Scalar  # on-board mass estimate (nominal flow)
     predicted_miss_m: Scalar  # |B_pred - aim| before the last burn
     burns: Scalar  # number of burns commanded so far
+    residual_m: Scalar  # largest |B_pred - aim| left by a burn's Newton solve so far
 
 
 def _time_of_flight_s(config) -> float:
@@ -162,7 +163,7 @@ class PredictiveGuidance(AbstractImpactorGuidance):
     def init(self, nav, ctx: ImpactorGuidanceContext) -> PredictiveGuidanceState:
         z = jnp.zeros(())
         return PredictiveGuidanceState(
-            z - 1.0, z, ctx.c_bi[1], z, jnp.asarray(ctx.mass_kg, float), z, z
+            z - 1.0, z, ctx.c_bi[1], z, jnp.asarray(ctx.mass_kg, float), z, z, z
         )
 
     def predict_b_plane(self, nav, t, t_burn, dv, mass_kg, ctx) -> Float[Array, "2"]:
@@ -183,8 +184,10 @@ class PredictiveGuidance(AbstractImpactorGuidance):
         b, _ = coast_to_b_plane(ctx.dynamics, y, ctx.c_bi, self.predictor_steps)
         return b
 
-    def solve_burn(self, nav, t, t_burn, mass_kg, ctx) -> tuple[Vector3, Scalar]:
-        """Newton iteration for the finite-burn Δv (m/s) that nulls the predicted miss."""
+    def solve_burn(self, nav, t, t_burn, mass_kg, ctx) -> tuple[Vector3, Scalar, Scalar]:
+        """Newton iteration for the finite-burn Δv (m/s) that nulls the predicted miss:
+        ``(dv, miss before, miss left)``, the predicted misses (m) at the straight-line first
+        guess and at the solution (one prediction more, as the midcourse targeter's)."""
         aim = ctx.aim_b_plane(t_burn)
         tr = ctx.c_bi[1:]
         # Impulsive straight-line first guess: dB = t_go * dv_(T,R).
@@ -203,14 +206,14 @@ class PredictiveGuidance(AbstractImpactorGuidance):
             return jnp.where(jnp.linalg.norm(err) > self.tolerance_m, dv - step, dv)
 
         dv = jax.lax.fori_loop(0, self.newton_iterations, newton, dv0)
-        return dv, miss0
+        return dv, miss0, jnp.linalg.norm(predicted(dv) - aim)
 
     def plan(self, state, nav, t, ctx: ImpactorGuidanceContext) -> PredictiveGuidanceState:
         window = (self.burn_times_s >= t) & (self.burn_times_s < t + ctx.image_interval_s)
         t_burn = jnp.sum(jnp.where(window, self.burn_times_s, 0.0))
 
         def schedule_burn(state):
-            dv, miss0 = self.solve_burn(nav, t, t_burn, state.mass_kg, ctx)
+            dv, miss0, left = self.solve_burn(nav, t, t_burn, state.mass_kg, ctx)
             dv_n = jnp.linalg.norm(dv)
             return PredictiveGuidanceState(
                 burn_start_s=t_burn,
@@ -220,11 +223,17 @@ class PredictiveGuidance(AbstractImpactorGuidance):
                 mass_kg=state.mass_kg,
                 predicted_miss_m=miss0,
                 burns=state.burns + 1.0,
+                residual_m=jnp.maximum(state.residual_m, left),
             )
 
         # `t` and the schedule are shared by every run of a batch, so under vmap the predicate
         # stays unbatched and the predictor runs only in the image intervals that hold a burn.
         return jax.lax.cond(jnp.any(window), schedule_burn, lambda s: s, state)
+
+    def converged(self, state):
+        """Every burn's Newton solve ended within ``tolerance_m`` of the aim point (in the
+        predictor's model; NaN reads as not converged)."""
+        return state.residual_m <= self.tolerance_m
 
     def step(self, state, nav, t, ctx: ImpactorGuidanceContext):
         end = state.burn_start_s + state.burn_duration_s

@@ -159,10 +159,12 @@ def finish(
         innovations_outside=tally.innovations_outside,
     )
     # A run whose navigation was lost ends nav_lost, ahead of what it then does to its fuel and
-    # its miss; a run out of propellant reads so ahead of the miss that follows from it.
+    # its miss; a law whose own solve failed (a burn's Newton iteration) ends no_convergence;
+    # a run out of propellant reads so ahead of the miss that follows from it.
     lost = navigation_lost(sim.n_images, tally.images_used, tally.innovations_outside)
     failures = (
         (lost, Status.nav_lost),
+        (~law.converged(state.law), Status.no_convergence),
         (outcome.fuel_kg > sim.propellant_kg, Status.propellant),
         (outcome.miss_m > sim.miss_limit_m, Status.missed),
     )

@@ -138,7 +138,9 @@ def finish(
     """The coast to the B-plane and the outcome: ``nan`` when a field is not finite, else
     ``out_of_domain`` when the B-plane miss exceeds the initial range (the run ends farther
     from the target than it started: no intercept), ``time_out`` when the B-plane is not
-    reached ahead, ``propellant`` when the run burned more than ``sim.propellant_kg``,
+    reached ahead, ``no_convergence`` when the law's own solve failed
+    (:meth:`~gnc_jax.guidance.base.AbstractGuidanceLaw.converged`; the packaged laws solve
+    nothing), ``propellant`` when the run burned more than ``sim.propellant_kg``,
     ``missed`` when the miss exceeds ``sim.miss_limit_m``, the delivery tolerance."""
     truth, tally = state.truth, state.tally
     b, t_rest = coast_to_b_plane(sim.dynamics, truth, sim.c_bi, sim.coast_steps)
@@ -169,6 +171,7 @@ def finish(
     failures = (
         (outcome.miss_m > sim.context.range0_m, Status.out_of_domain),
         (~(t_rest > 0.0), Status.time_out),
+        (~law.converged(state.law), Status.no_convergence),
         (outcome.fuel_kg > sim.propellant_kg, Status.propellant),
         (outcome.miss_m > sim.miss_limit_m, Status.missed),
     )

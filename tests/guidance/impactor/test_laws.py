@@ -1,5 +1,6 @@
 """Impactor guidance laws: switching curves, hysteresis, thrust direction, predictive burns."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -182,6 +183,24 @@ def test_predictive_burn_nulls_the_predicted_miss():
     assert np.linalg.norm(np.asarray(b)) < 1.0  # aim (0, 0) before the retarget; mass flow ~cm
     t_go = 7.344e7 / 1.02e4 - 1200.0  # impulsive straight-line estimate: |miss| / t_go
     assert float(state.burn_dv_mps) == pytest.approx(float(state.predicted_miss_m) / t_go, rel=0.01)
+
+
+def test_predictive_burn_reports_the_miss_its_solve_leaves():
+    """The Newton solve's residual, predicted again at the solution: nanometres for the
+    packaged engine (converged), kilometres for an engine whose burn outlasts the approach."""
+    ctx = context()
+    r = np.array([7.344e7 - 1.02e4 * 1195.0, 4e3, -7e3])
+    v = np.array([-1.02e4, 0.3, -0.1])
+    nav = nav_at(r, v)
+    law = PredictiveGuidance(burn_times_s=jnp.array([1200.0]))
+    state = law.plan(law.init(nav, ctx), nav, 1195.0, ctx)
+    assert float(state.residual_m) < 1e-4 and bool(law.converged(state))
+    weak = eqx.tree_at(lambda c: c.engine.thrust_n, ctx, jnp.asarray(0.05))
+    state = law.plan(law.init(nav, weak), nav, 1195.0, weak)
+    assert float(state.burn_duration_s) > 1e4  # longer than the 6000 s left
+    assert float(state.residual_m) > 1e3 and not bool(law.converged(state))
+    nan = state._replace(residual_m=jnp.asarray(jnp.nan))
+    assert not bool(law.converged(nan))
 
 
 def test_predictive_throttle_covers_the_burn_exactly():

@@ -65,6 +65,21 @@ def test_a_perfect_sensor_keeps_navigation(short_scenario):
     assert s["dv_max_mps"] < 20.0 and s["firings_max"] <= 8
 
 
+def test_a_burn_the_engine_cannot_fly_reads_no_convergence():
+    """Predictive guidance solves each burn by Newton iterations; an engine too weak for the
+    schedule (2 N for burns 100-400 s before impact) leaves the predicted miss kilometres from
+    the aim point. Those runs missed by 3.5 km RMS and read ``ok``; they end
+    ``no_convergence`` now, and the packaged engine's runs stay ``ok``."""
+    sc = gj.load_scenario("deep-impact-predictive", overrides=SHORT)
+    weak = gj.run_study(
+        sc.with_overrides(["spacecraft.thrust_n=2"]), runs=20, seed=0, progress=False
+    )
+    assert np.all(weak.outcomes["status"] == gj.Status.no_convergence)
+    assert np.median(weak.outcomes["miss_m"]) > 1e3
+    nominal = gj.run_study(sc, runs=20, seed=0, progress=False)
+    assert np.all(nominal.outcomes["status"] == gj.Status.ok)
+
+
 def test_a_miss_beyond_the_delivery_tolerance_reads_missed():
     """A run whose B-plane point lies farther from the aim point than ``guidance.miss_limit_km``
     reads ``missed`` (an engine too weak to steer, 0.001 N, missed Tempel 1 by 13-20 km and
