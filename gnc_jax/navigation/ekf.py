@@ -23,12 +23,14 @@ _S_FLOOR = 1e-200  # added to the innovation covariance's diagonal (see ekf_upda
 # * more than NAV_LOST_UNUSED of the images gave no update (rejected: nothing found, or the
 #   window left the ROI), or
 # * more than NAV_LOST_OUTSIDE of the used images had an innovation beyond the chi-square
-#   99.9 % bound (NIS_BOUND_2DOF = -2 ln 0.001 = 13.8 for 2 degrees of freedom): a consistent
-#   filter has 0.1 % of its images there, one that has lost the target has most of them.
+#   99.9 % bound (NIS_BOUND_2DOF = -2 ln 0.001 = 13.8 for 2 degrees of freedom, NIS_BOUND_1DOF
+#   = 10.8 for a planar filter's one angle): a consistent filter has 0.1 % of its images there,
+#   one that has lost the target has most of them.
 # The two fractions are "most": half.
 NAV_LOST_UNUSED = 0.5
 NAV_LOST_OUTSIDE = 0.5
 NIS_BOUND_2DOF = 13.815510557964274  # chi2.ppf(0.999, 2) = -2 ln(1e-3)
+NIS_BOUND_1DOF = 10.827566170662733  # chi2.ppf(0.999, 1)
 
 
 def normalised_innovation_squared(innovation, s) -> Float[Array, ""]:

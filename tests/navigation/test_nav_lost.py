@@ -6,6 +6,7 @@ from scipy import stats
 
 import gnc_jax as gj
 from gnc_jax.navigation.ekf import (
+    NIS_BOUND_1DOF,
     NIS_BOUND_2DOF,
     navigation_lost,
     normalised_innovation_squared,
@@ -15,6 +16,7 @@ from gnc_jax.systems.impactor.system import ImpactorSystem
 
 def test_nis_and_its_bound():
     assert abs(NIS_BOUND_2DOF - stats.chi2.ppf(0.999, 2)) < 1e-9
+    assert abs(NIS_BOUND_1DOF - stats.chi2.ppf(0.999, 1)) < 1e-9
     rng = np.random.default_rng(1)
     for _ in range(20):
         a = rng.normal(size=(2, 2))

@@ -11,7 +11,7 @@ from ...guidance.intercept.apn import AugmentedPNGuidance, PNNavigation
 from ..loop import LoopState
 from .draws import N_IGNITION_DRAWS
 from .navigation import predict_mean
-from .state import Estimate, PNRecord, PNSimulation, PulseActuator, PulseTally
+from .state import Estimate, PNRecord, PNSimulation, PulseActuator
 
 
 def guidance_step(
@@ -87,7 +87,7 @@ def guidance_step(
         estimate=estimate,
         law=law_state,
         actuator=PulseActuator(direction_prev=direction, pointing_error=pointing),
-        tally=PulseTally(
+        tally=tally._replace(
             dv_mps=tally.dv_mps + safe_norm(dv),
             firings=tally.firings + (ignition | reversal).astype(jnp.int32),
             ignitions=tally.ignitions + ignition.astype(jnp.int32),

@@ -12,7 +12,7 @@ import jax.numpy as jnp
 from ..._numerics import as_array, computed_once
 from ..._types import Array, Float, PRNGKeyArray, Vector3
 from ...navigation.camera import camera_axes
-from ...navigation.ekf import NavEstimate
+from ...navigation.ekf import NIS_BOUND_1DOF, NIS_BOUND_2DOF, NavEstimate
 from ...navigation.measurements import Exposure
 from ...navigation.packed_ekf import (
     ANGLE_NOISE_FLOOR_RAD,
@@ -62,8 +62,9 @@ def take_image(
     The update is ``navigation.ekf.ekf_update`` of ``predict_los`` in packed, sequential form
     (``navigation.packed_ekf``); a planar run takes the in-plane angle only (the out-of-plane
     one is exact and would change only out-of-plane entries, see ``packed_ekf.los_update``).
-    Returns the :class:`~gnc_jax.navigation.packed_ekf.LOSGain` (zero for a rejected image);
-    the caller updates the covariance (``apply_gain``, fused with the propagation).
+    Returns the :class:`~gnc_jax.navigation.packed_ekf.LOSGain` (zero for a rejected image)
+    and whether the image was used; the caller updates the covariance (``apply_gain``, fused
+    with the propagation).
     """
     # The camera's axes as three row vectors, each product written per row: the stacked
     # matrix is built only for the front end's exposure (read row-wise it is never stored).
@@ -75,7 +76,7 @@ def take_image(
     meas = sim.measurement(Exposure(-as_array(r_true), c_cam, c_cam), nav, predicted, w, key)
     angles = 1 if sim.planar else 2
     innovation = [meas.z[a] - predicted.z[a] for a in range(2)]
-    return los_gain(r_hat, v_hat, p, h_r, innovation, r_var, angles, meas.valid)
+    return los_gain(r_hat, v_hat, p, h_r, innovation, r_var, angles, meas.valid), meas.valid
 
 
 def image_update(
@@ -86,15 +87,17 @@ def image_update(
     estimate: Estimate,
     r_true: Vector3,
     w: Float[Array, "2"],
-) -> Estimate:
+) -> tuple[Estimate, Array, Array]:
     """The estimate after image ``i`` (at time ``t``, measurement normals ``w``), its
-    covariance propagated over the image interval."""
+    covariance propagated over the image interval; whether the image was used, and whether
+    its innovation lay beyond the chi-square 99.9 % bound (``navigation.ekf.NIS_BOUND_*``,
+    for the angles taken)."""
     # The gain once into memory; the covariance update then reads it in one elementwise pass
     # with the propagation (P is not read by the guidance steps in between). The front end's
     # key is derived inside the fenced branch, where XLA drops it when the front end draws
     # nothing (derived outside, its two threefry hashes ran at every image: 15 ns of a 190 ns
     # guidance step).
-    gain = computed_once(  # live: the float time (an integer ``i == i`` folds to true)
+    gain, used = computed_once(  # live: the float time (an integer ``i == i`` folds to true)
         lambda *a: take_image(sim, *a, front_end_key(key, i)),
         t,
         estimate.r_hat,
@@ -105,7 +108,8 @@ def image_update(
     )
     image_dt = sim.context.dt_s * sim.steps_per_image
     p = propagate_packed(apply_gain(estimate.p, gain.terms), image_dt, sim.process_noise_m2s3)
-    return Estimate(gain.r, gain.v, p)
+    bound = NIS_BOUND_1DOF if sim.planar else NIS_BOUND_2DOF
+    return Estimate(gain.r, gain.v, p), used, used & (gain.nis > bound)
 
 
 def predict_mean(r_hat: Vector3, v_hat: Vector3, dv_nav: Vector3, dt) -> tuple[Vector3, Vector3]:

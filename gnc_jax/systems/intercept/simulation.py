@@ -33,6 +33,7 @@ from ..._types import PRNGKeyArray
 from ...dynamics.intercept import coast_to_b_plane
 from ...geometry.silhouette import focusing_factor
 from ...guidance.intercept.apn import AugmentedPNGuidance
+from ...navigation.ekf import navigation_lost
 from ..loop import LoopState, closed_loop, flatten_trace, scan_in_blocks, with_status
 from .draws import (
     DRAW_BLOCK,
@@ -60,7 +61,15 @@ def start(
         estimate=() if sim.nav_model == "perfect" else initial_estimate(sim, know_pos, know_vel),
         law=law.init(None, sim.context),
         actuator=PulseActuator(direction_prev=jnp.zeros(3), pointing_error=jnp.zeros(2)),
-        tally=PulseTally(dv_mps=z, firings=zi, ignitions=zi, pulses=zi, last_firing_s=z),
+        tally=PulseTally(
+            dv_mps=z,
+            firings=zi,
+            ignitions=zi,
+            pulses=zi,
+            last_firing_s=z,
+            images_used=zi,
+            innovations_outside=zi,
+        ),
     )
     return state, draws
 
@@ -77,8 +86,17 @@ def _image_step(
     t = i * (dt * sim.steps_per_image)
     w = image_draws_of(column, sim.planar)
     if sim.nav_model != "perfect":
-        estimate = image_update(sim, key, i, t, state.estimate, state.truth.r, w.measurement)
-        state = state._replace(estimate=estimate)
+        estimate, used, outside = image_update(
+            sim, key, i, t, state.estimate, state.truth.r, w.measurement
+        )
+        tally = state.tally
+        state = state._replace(
+            estimate=estimate,
+            tally=tally._replace(
+                images_used=tally.images_used + used.astype(jnp.int32),
+                innovations_outside=tally.innovations_outside + outside.astype(jnp.int32),
+            ),
+        )
     step = functools.partial(guidance_step, sim, law, pointing_table, record)
     if sim.steps_per_image == 1:  # one step per image: no inner loop (and its carry copies)
         state, rec = step(state, jnp.asarray(t, float))
@@ -136,15 +154,19 @@ def finish(
     state: LoopState,
 ) -> PNOutcome:
     """The coast to the B-plane and the outcome: ``nan`` when a field is not finite, else
-    ``out_of_domain`` when the B-plane miss exceeds the initial range (the run ends farther
-    from the target than it started: no intercept), ``time_out`` when the B-plane is not
-    reached ahead, ``no_convergence`` when the law's own solve failed
-    (:meth:`~gnc_jax.guidance.base.AbstractGuidanceLaw.converged`; the packaged laws solve
-    nothing), ``propellant`` when the run burned more than ``sim.propellant_kg``,
-    ``missed`` when the miss exceeds ``sim.miss_limit_m``, the delivery tolerance."""
+    ``nav_lost`` when the filter lost the target (``navigation.ekf.navigation_lost``: most
+    images unused or beyond their innovation bound), ``out_of_domain`` when the B-plane miss
+    exceeds the initial range (the run ends farther from the target than it started: no
+    intercept), ``time_out`` when the B-plane is not reached ahead, ``no_convergence`` when
+    the law's own solve failed (:meth:`~gnc_jax.guidance.base.AbstractGuidanceLaw.converged`;
+    the packaged laws solve nothing), ``propellant`` when the run burned more than
+    ``sim.propellant_kg``, ``missed`` when the miss exceeds ``sim.miss_limit_m``, the
+    delivery tolerance."""
     truth, tally = state.truth, state.tally
+    perfect = sim.nav_model == "perfect"
+    one = jnp.ones((), jnp.int32)
     b, t_rest = coast_to_b_plane(sim.dynamics, truth, sim.c_bi, sim.coast_steps)
-    nav_r = truth.r if sim.nav_model == "perfect" else state.estimate.r_hat
+    nav_r = truth.r if perfect else state.estimate.r_hat
     outcome = PNOutcome(
         status=jnp.zeros((), jnp.int32),
         miss_m=safe_norm(b),
@@ -166,9 +188,15 @@ def finish(
                 sim.dynamics.mu_target, sim.dynamics.target_radius_m, safe_norm(sim.y0.v)
             )
         ),
+        images_rejected=(0 if perfect else sim.n_images - tally.images_used) * one,
+        innovations_outside=tally.innovations_outside,
     )
     # ``not (t_rest > 0)`` rather than ``t_rest <= 0``: a NaN coast time is a time-out too.
+    # A run whose navigation was lost ends nav_lost, ahead of what it then does to its miss and
+    # fuel (a perfect navigation model takes no image).
+    lost = ~perfect & navigation_lost(sim.n_images, tally.images_used, tally.innovations_outside)
     failures = (
+        (lost, Status.nav_lost),
         (outcome.miss_m > sim.context.range0_m, Status.out_of_domain),
         (~(t_rest > 0.0), Status.time_out),
         (~law.converged(state.law), Status.no_convergence),

@@ -85,6 +85,8 @@ class PulseTally(NamedTuple):
     ignitions: Array  # int, trigger off -> on transitions
     pulses: Array  # int, guidance steps with the engine on
     last_firing_s: Scalar  # mission time of the last pulse (0 if none)
+    images_used: Array  # int, images that updated the filter
+    innovations_outside: Array  # int, used images with NIS beyond the 99.9 % chi-square bound
 
 
 class PNOutcome(NamedTuple):
@@ -106,6 +108,8 @@ class PNOutcome(NamedTuple):
     # B-plane miss over the capture radius of the spherical target (< 1: a hit, see
     # gnc_jax.geometry.silhouette)
     silhouette_ratio: Scalar
+    images_rejected: Array  # int, images that gave no update (0 with navigation.model "perfect")
+    innovations_outside: Array  # int, used images with NIS beyond the chi-square 99.9 % bound
 
 
 class PNRecord(NamedTuple):

@@ -57,6 +57,10 @@ def _intercept_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str,
         pulses_mean=float(np.mean(o["pulses"][ok])),
         last_firing_s_mean=float(np.mean(o["last_firing_s"][ok])),
         nav_position_error_m_rms=float(np.sqrt(np.mean(o["nav_position_error_m"][ok] ** 2))),
+        images_rejected_max=int(np.max(o["images_rejected"][ok])),
+        innovations_outside_mean=float(np.mean(o["innovations_outside"][ok])),
+        innovations_outside_max=int(np.max(o["innovations_outside"][ok])),
+        nav_lost=int(np.sum(o["status"] == Status.nav_lost)),
     )
     return out
 

@@ -36,6 +36,24 @@ def test_guidance_removes_the_delivery_error(short_scenario):
         assert s["miss_r_std_m"] == 0.0  # planar: the miss is B_T only
 
 
+def test_a_filter_that_trusts_its_angles_too_much_ends_nav_lost(short_scenario):
+    """The filter's innovations are checked against their covariance as the impactor's are
+    (``navigation.ekf.navigation_lost``). A consistent filter has about 0.1 % of its images
+    beyond the 99.9 % bound; one that assumes 10 urad for a 320 urad sensor has nearly all of
+    them there and every run ends ``nav_lost``. (Such runs read ``ok`` before the intercept
+    had the check, at twice the Δv.)"""
+    nominal = gj.run_study(short_scenario, runs=6, seed=0, progress=False)  # compiled above
+    o = nominal.outcomes
+    assert np.all(o["status"] == gj.Status.ok) and np.all(o["images_rejected"] == 0)
+    n_images = gj.build(short_scenario)[0].n_images
+    assert np.all(o["innovations_outside"] <= 0.01 * n_images)
+    tight = short_scenario.with_overrides(["navigation.model_attitude_urad=10"])
+    lost = gj.run_study(tight, runs=6, seed=0, progress=False)
+    assert np.all(lost.outcomes["status"] == gj.Status.nav_lost)
+    assert np.all(lost.outcomes["innovations_outside"] > 0.5 * n_images)
+    assert lost.summary()["failed_by_status"] == {"nav_lost": 6}
+
+
 def test_3d_geometry_is_the_planar_case_on_bennus_orbit():
     planar, _ = initial_state(parameters(gj.load_scenario("bennu-apn").config))
     y3, is_planar = initial_state(parameters(gj.load_scenario("bennu-apn-3d").config))
