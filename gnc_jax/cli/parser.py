@@ -2,6 +2,7 @@
 
 import argparse
 
+from ..tuning.objectives import term_forms
 from .arguments import (
     _device,
     _max_failed,
@@ -177,9 +178,9 @@ def _add_tune(sub) -> None:
     q.add_argument(
         "--objective",
         default=None,
-        help="e.g. 'miss_rms+10*dv_mean' (terms over the ok runs: miss_rms, dv_mean, "
-        "hit_probability, chute_rms, peak_load(LIMIT_G); failed: the fraction of runs not ok, "
-        "e.g. 'miss_rms+100*failed'); default: the system's smooth objective",
+        help=f"e.g. 'miss_rms+10*dv_mean' (terms over the ok runs: {term_forms()}; failed: "
+        "the fraction of runs not ok, e.g. 'miss_rms+100*failed'); default: the system's "
+        "smooth objective",
     )
     q.add_argument("--batch", type=_positive_int("--batch"), default=64, help="runs per step")
     q.add_argument("--steps", type=_positive_int("--steps"), default=40, help="optimiser steps")

@@ -122,7 +122,7 @@ TERMS: dict[str, ObjectiveTerm] = {
         "RMS of the chute-deploy error, km",
     ),
     "peak_load": ObjectiveTerm(
-        _peak_load, ("load_peak_g",), "mean excess of the peak load over a limit, g", "limit in g"
+        _peak_load, ("load_peak_g",), "mean excess of the peak load over a limit, g", "LIMIT_G in g"
     ),
     "failed": ObjectiveTerm(
         _failed, (), "fraction of the runs that did not end ok (over every run)", over_ok=False
@@ -144,6 +144,11 @@ def _term_forms(name: str, term: ObjectiveTerm) -> str:
         return name
     with_arg = f"{name}({term.arg.split(' ')[0].rstrip(',')})"
     return with_arg if term.arg_fields is None else f"{name}, {with_arg}"
+
+
+def term_forms() -> str:
+    """The built-in terms as written in an objective, ``failed`` apart (the CLI's help)."""
+    return ", ".join(_term_forms(n, t) for n, t in TERMS.items() if n != "failed")
 
 
 def _allowed_objectives() -> str:

@@ -237,7 +237,10 @@ def design_at_the_edge(
         )
         require_design(problem, d, entry, vehicle)
     except ScenarioError as e:
-        raise ScenarioError(f"{refusal}; with {banks}: {str(e).partition('; ')[2]}") from None
+        # what the edge design allows, without a second "allowed:" on the refusal's line
+        head, allowed, rest = str(e).partition("; allowed: ")
+        rest = rest if allowed else head.partition("; ")[2]
+        raise ScenarioError(f"{refusal}; with {banks} too: {rest}") from None
     print(edge_notice(entry, d), file=sys.stderr, flush=True)
     return d
 
