@@ -18,7 +18,9 @@ import numpy as np
 
 from ..._numerics import LoopShape
 from ..._status import Status, shown_run
+from ...geometry.bplane import b_plane_frame
 from ...geometry.ellipse import ellipse_probability
+from ...geometry.silhouette import focusing_factor, silhouette_matrix, silhouette_ratio
 from ...guidance.impactor.base import AbstractImpactorGuidance
 from ...navigation.camera import camera_attitude, los_angles
 from ...navigation.centroid import extract_centroid
@@ -324,6 +326,30 @@ class ImpactorSystem(AbstractSystem):
     def check(self, config):
         impactor_scenario.check(config)
         measurement_class(config["navigation"]["measurement"]).check(config)
+
+    def warnings(self, config):
+        """The law's warnings, and a final aim point outside the target's shadow (a run that
+        flies it exactly misses the body: usually an aim point meant for another target)."""
+        out = super().warnings(config)
+        p = ImpactorParams.of(config)
+        a, g = p.approach, p.guidance
+        target = p.target.model(p.dynamics.sun_unit)
+        shadow = silhouette_matrix(
+            target.semi_axes_m, target.c_bi, b_plane_frame(a.velocity_mps, a.reference_normal)
+        )
+        speed = jnp.linalg.norm(jnp.asarray(a.velocity_mps))
+        focusing = focusing_factor(p.dynamics.mu_target_m3s2, target.mean_radius_m, speed)
+        ratio = float(silhouette_ratio(g.aim_final_m, shadow, focusing))
+        if ratio >= 1.0:
+            aim = ", ".join(f"{x:g}" for x in config["guidance"]["aim_final_km"])
+            axes = ", ".join(f"{x:g}" for x in config["target"]["semi_axes_km"])
+            out.append(
+                f"guidance.aim_final_km: ({aim}) km lies outside the target's shadow in the "
+                f"B-plane ({ratio:.3g} times its edge's distance along that direction; "
+                f"target.semi_axes_km = [{axes}]): a run that flies it exactly misses the "
+                "target, and hit_probability counts it a miss"
+            )
+        return out
 
     def build(self, scenario):
         sim = impactor_build.build(scenario)

@@ -206,6 +206,23 @@ def test_tempel_1_shadow_holds_the_aim_point_that_a_3_km_sphere_misses():
     assert list(sphere < 1.0) == [False, False, True, False]  # (2.6, 0) km: inside 3 km only
 
 
+def test_an_aim_point_off_the_target_is_warned_about():
+    """The final aim point (1, 3) km lies sqrt(10) = 3.162 km from the centre: inside Tempel 1's
+    shadow and a 3.2 km sphere's (no gravity: no focusing), outside a 3.1 km sphere's, where a
+    run that flies it exactly misses the body. Warned, not refused."""
+    system = gj.get_system("impactor")
+
+    def warned(radius_km=None):
+        r = radius_km
+        over = [] if r is None else [f"target.semi_axes_km=[{r}, {r}, {r}]"]
+        found = system.warnings(gj.load_scenario("deep-impact-los", overrides=over).config)
+        return [w for w in found if w.startswith("guidance.aim_final_km: (1, 3) km lies outside")]
+
+    assert warned() == [] and warned(3.2) == []
+    (text,) = warned(3.1)
+    assert "1.02 times its edge's distance" in text  # 3.162 / 3.1
+
+
 def test_image_update_equals_the_dense_joseph_ekf_with_rodrigues_attitudes():
     # The loop's image (camera rows, series rotations, two scalar updates on the packed
     # covariance, NIS from the sequence) against the textbook chain: Rodrigues rotations,
