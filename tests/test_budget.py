@@ -2,6 +2,7 @@
 are known exactly (tests/budget_toy.py), the routing of each source's draws checked on the draws
 themselves, and the budget's own checks."""
 
+import importlib
 import json
 import os
 import pathlib
@@ -65,6 +66,25 @@ def test_linear_toy_shares_are_the_analytic_ones(toy):
     study = gj.run_study(toy.toy_scenario(), runs=RUNS, seed=5)
     assert b.checks["y"]["all_on_variance"] == np.var(study.outcomes["y"], ddof=1)
     assert b.nominal == {"status": 0, "identical_runs": True, "y": 0.0}
+
+
+def test_a_declared_reason_replaces_the_linear_method(toy, monkeypatch):
+    """A system that declares its derivatives are no sensitivities (the impactor with the
+    rendered image front end) gets no linear shares: the reason is the budget's
+    ``linear_error``, printed in place of the column, and the linear pass is not run."""
+    reason = "derivatives through this model are not sensitivities"
+    monkeypatch.setattr(toy.ToyBudgetSystem, "linear_unavailable", lambda self, cfg: reason)
+    ran = []
+    engine = importlib.import_module("gnc_jax.budget.engine")  # gj.budget is the function
+    monkeypatch.setattr(engine, "linear_responses", lambda *a, **k: ran.append(1))
+    b = gj.budget(toy.toy_scenario(), runs=64, seed=5, methods=("oat", "linear"), bootstrap=20)
+    assert b.linear_error == reason and not ran
+    assert not [r for r in b.rows if r["method"] == "linear"]
+    assert [r for r in b.rows if r["method"] == "one_at_a_time"]
+    impactor = gj.get_system("impactor")
+    rendered = gj.load_scenario("autonav-predictive").config
+    assert "navigation.measurement = 'image'" in impactor.linear_unavailable(rendered)
+    assert impactor.linear_unavailable(gj.load_scenario("deep-impact-los").config) is None
 
 
 def test_product_term_is_reported_as_an_interaction(toy):

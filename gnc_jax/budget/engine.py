@@ -97,7 +97,11 @@ def budget(
     metrics = _check(scenario, system, runs, metrics, tuple(methods))
     facs, inactive = factors(system, scenario, groups)
     names, n = list(facs), len(facs)
-    study_runs, _, cost = budget_cost(scenario, runs, n, methods)
+    # a reason the system declares why derivatives are no sensitivities: the linear method is
+    # reported as not available, and neither run nor costed
+    declared = system.linear_unavailable(scenario.config) if "linear" in methods else None
+    run_methods = tuple(m for m in methods if not (m == "linear" and declared))
+    study_runs, _, cost = budget_cost(scenario, runs, n, run_methods)
     if cost.seconds is not None and cost.seconds > max_hours * 3600:
         raise ScenarioError(
             f"cost: {cost}; allowed: at most {max_hours:g} h (raise max_hours, CLI --max-hours, "
@@ -109,7 +113,7 @@ def budget(
     lay = layout(system, facs)
     seed_b = (seed + SEED_B_OFFSET) % 2**32
     bar = tqdm(
-        total=study_runs + (runs if "linear" in methods else 0),
+        total=study_runs + (runs if "linear" in run_methods else 0),
         desc=scenario.name,
         unit="run",
         disable=not (progress or announce),
@@ -149,12 +153,14 @@ def budget(
         if "linear" in methods:
             sim, law = build(scenario)
             t_lin = time.perf_counter()
-            try:
-                linear = linear_responses(
-                    system, sim, law, seed, runs, metrics, n, lay, chunk_size or 64, bar.update
-                )
-            except Exception as e:  # a construct forward mode cannot differentiate
-                linear = f"{type(e).__name__}: {str(e).splitlines()[0][:200]}"
+            linear = declared
+            if linear is None:
+                try:
+                    linear = linear_responses(
+                        system, sim, law, seed, runs, metrics, n, lay, chunk_size or 64, bar.update
+                    )
+                except Exception as e:  # a construct forward mode cannot differentiate
+                    linear = f"{type(e).__name__}: {str(e).splitlines()[0][:200]}"
             linear_s = time.perf_counter() - t_lin
     finally:
         bar.close()

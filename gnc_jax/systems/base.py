@@ -261,6 +261,12 @@ class AbstractSystem(abc.ABC):
         """Cross-field checks of a validated configuration (raise :class:`ScenarioError`)."""
         return None
 
+    def linear_unavailable(self, config: dict) -> str | None:
+        """Why the error budget's linear method (forward-mode derivatives about the nominal
+        run) does not apply to a validated configuration, or None when it does. Default:
+        None."""
+        return None
+
     def warnings(self, config: dict) -> list[str]:
         """One-line warnings about a valid but doubtful configuration: the law's (its
         ``warnings``); printed by the CLI before a study and kept in ``summary.json``."""

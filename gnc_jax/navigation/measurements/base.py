@@ -66,6 +66,9 @@ class AbstractMeasurement(eqx.Module):
 
     measurements: ClassVar[dict[str, type]] = {}
     measurement_name: ClassVar[str] = ""
+    # Why the front end's derivatives with respect to the geometry and the draws are not
+    # sensitivities (empty: they are). The linearised error budget is then not computed.
+    not_differentiable: ClassVar[str] = ""
 
     @abc.abstractmethod
     def __call__(

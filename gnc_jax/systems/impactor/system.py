@@ -327,6 +327,13 @@ class ImpactorSystem(AbstractSystem):
         impactor_scenario.check(config)
         measurement_class(config["navigation"]["measurement"]).check(config)
 
+    def linear_unavailable(self, config):
+        """The measurement front end's reason, when its derivatives are not sensitivities
+        (the rendered image front end)."""
+        name = config["navigation"]["measurement"]
+        reason = measurement_class(name).not_differentiable
+        return f"navigation.measurement = {name!r}: {reason}" if reason else None
+
     def warnings(self, config):
         """The law's warnings, and a final aim point outside the target's shadow (a run that
         flies it exactly misses the body: usually an aim point meant for another target)."""
