@@ -164,3 +164,20 @@ def test_the_printed_intervals_carry_their_units(capsys):
     failed = {"runs": 5, "failed": 3, "failed_by_status": {"nan": 2, "time_out": 1}}
     line = _failed_runs_line(failed, 0.1)
     assert line == "gnc-jax: 3 of 5 runs failed (nan 2, time_out 1), more than --max-failed 0.1"
+
+
+def test_hit_probability_over_every_run_counts_failed_runs_where_they_crossed():
+    """Over the ok runs as before; when runs failed, also over every run: a failed run inside
+    the silhouette is a hit, one outside or with no crossing (NaN) a miss."""
+    from gnc_jax.systems.impact import hit_statistics
+
+    ratio = np.array([0.2, 0.9, 1.5, 0.5, 3.0, np.nan, 0.7])
+    ok = np.array([True, True, True, False, False, False, True])
+    s = hit_statistics({"silhouette_ratio": ratio}, ok)
+    assert (s["hits"], s["hit_probability"]) == (3, 0.75)
+    assert (s["hits_all_runs"], s["hit_probability_all_runs"]) == (4, 4 / 7)
+    lo, hi = s["hit_probability_all_runs_ci95"]
+    ref = stats.binomtest(4, 7).proportion_ci(0.95, method="wilson")
+    assert (lo, hi) == pytest.approx((ref.low, ref.high), rel=1e-9)
+    # every run ok: nothing more to say
+    assert "hits_all_runs" not in hit_statistics({"silhouette_ratio": ratio[:3]}, ok[:3])

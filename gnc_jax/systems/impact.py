@@ -70,18 +70,30 @@ HIT_RULE = (
 
 def hit_statistics(o: dict[str, np.ndarray], ok: np.ndarray) -> dict[str, Any]:
     """Probability of hitting the body (:mod:`gnc_jax.geometry.silhouette`) over the ``ok``
-    runs, with its 95 % Wilson score interval (:func:`gnc_jax.statistics.wilson_interval`)."""
+    runs, with its 95 % Wilson score interval (:func:`gnc_jax.statistics.wilson_interval`);
+    when runs failed, also over every run (``*_all_runs``), a failed run counted by where it
+    crossed the B-plane (a run that crossed nowhere, NaN, as a miss)."""
     n = int(np.sum(ok))
     if n == 0:
         return {}
     hits = int(np.sum(o["silhouette_ratio"][ok] < 1.0))
     lo, hi = wilson_interval(hits, n)
-    return dict(
+    out = dict(
         hits=hits,
         hit_probability=hits / n,
         hit_probability_ci95=[lo, hi],
         hit_rule=HIT_RULE,
     )
+    if n < ok.size:  # runs failed: the probability over every run, each where it crossed
+        # the B-plane (a failed run is not a hit unless it crossed inside; NaN is a miss)
+        every = int(np.sum(np.nan_to_num(o["silhouette_ratio"], nan=np.inf) < 1.0))
+        lo_all, hi_all = wilson_interval(every, ok.size)
+        out.update(
+            hits_all_runs=every,
+            hit_probability_all_runs=every / ok.size,
+            hit_probability_all_runs_ci95=[lo_all, hi_all],
+        )
+    return out
 
 
 IMPACT_LABELS = {
