@@ -191,10 +191,14 @@ def finish(
         images_rejected=(0 if perfect else sim.n_images - tally.images_used) * one,
         innovations_outside=tally.innovations_outside,
     )
-    # ``not (t_rest > 0)`` rather than ``t_rest <= 0``: a NaN coast time is a time-out too.
     # A run whose navigation was lost ends nav_lost, ahead of what it then does to its miss and
     # fuel (a perfect navigation model takes no image).
-    lost = ~perfect & navigation_lost(sim.n_images, tally.images_used, tally.innovations_outside)
+    lost = (
+        jnp.asarray(False)
+        if perfect
+        else navigation_lost(sim.n_images, tally.images_used, tally.innovations_outside)
+    )
+    # ``not (t_rest > 0)`` rather than ``t_rest <= 0``: a NaN coast time is a time-out too.
     failures = (
         (lost, Status.nav_lost),
         (outcome.miss_m > sim.context.range0_m, Status.out_of_domain),
