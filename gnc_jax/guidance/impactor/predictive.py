@@ -36,7 +36,8 @@ class PredictiveGuidanceState(NamedTuple):
     mass_kg: Scalar  # on-board mass estimate (nominal flow)
     predicted_miss_m: Scalar  # |B_pred - aim| before the last burn
     burns: Scalar  # number of burns commanded so far
-    residual_m: Scalar  # largest |B_pred - aim| left by a burn's Newton solve so far
+    residual_m: Scalar  # largest |B_pred - aim| left by a burn's Newton solve so far (inf for
+    # a burn that does not end before the cut-off: the engine stops there)
 
 
 def _time_of_flight_s(config) -> float:
@@ -215,9 +216,13 @@ class PredictiveGuidance(AbstractImpactorGuidance):
         def schedule_burn(state):
             dv, miss0, left = self.solve_burn(nav, t, t_burn, state.mass_kg, ctx)
             dv_n = jnp.linalg.norm(dv)
+            duration = dv_n * state.mass_kg / ctx.engine.thrust_n
+            # A solution that does not end before the cut-off cannot be flown (a weak engine's
+            # burn can even outlast the approach): its residual is not what is flown.
+            left = jnp.where(t_burn + duration > ctx.cutoff_time_s, jnp.inf, left)
             return PredictiveGuidanceState(
                 burn_start_s=t_burn,
-                burn_duration_s=dv_n * state.mass_kg / ctx.engine.thrust_n,
+                burn_duration_s=duration,
                 burn_direction=safe_unit(dv, ctx.c_bi[1]),
                 burn_dv_mps=dv_n,
                 mass_kg=state.mass_kg,
@@ -232,7 +237,8 @@ class PredictiveGuidance(AbstractImpactorGuidance):
 
     def converged(self, state):
         """Every burn's Newton solve ended within ``tolerance_m`` of the aim point (in the
-        predictor's model; NaN reads as not converged)."""
+        predictor's model; NaN reads as not converged) with a burn that ends before the
+        cut-off."""
         return state.residual_m <= self.tolerance_m
 
     def step(self, state, nav, t, ctx: ImpactorGuidanceContext):

@@ -201,6 +201,11 @@ def test_predictive_burn_reports_the_miss_its_solve_leaves():
     assert float(state.residual_m) > 1e3 and not bool(law.converged(state))
     nan = state._replace(residual_m=jnp.asarray(jnp.nan))
     assert not bool(law.converged(nan))
+    # converged, but the 7 s burn from 1200 s would end after a cut-off at 1203 s: not flown
+    early = eqx.tree_at(lambda c: c.cutoff_time_s, ctx, jnp.asarray(1203.0))
+    state = law.plan(law.init(nav, early), nav, 1195.0, early)
+    assert 3.0 < float(state.burn_duration_s) < 20.0
+    assert not bool(law.converged(state))
 
 
 def test_predictive_throttle_covers_the_burn_exactly():
