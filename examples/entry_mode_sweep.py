@@ -3,11 +3,13 @@
 python examples/entry_mode_sweep.py [runs] [out_dir] [ranges_km]
 
 Runs ``lunar-skip-entry`` (``guidance.skip_entry.entry_mode = "auto"``) at its packaged entry
-angle for each range (default 1400..6000 km, straddling the end of the direct reach, 3077 km
-at -5.9 deg), ``runs`` runs each (default 200, seed 0), and writes ``sweep.json`` (range,
-mode flown, ok fraction, failures by status, chute 3-sigma) and ``sweep.png`` (failed fraction
-and chute 3-sigma against range) to ``out_dir`` (default ``results/entry-mode-sweep``).
-The mode flown is read from the outcome: a direct entry has no switch point.
+angle for each range (default 1600..6000 km, straddling both ends of the direct reach,
+1629..3077 km at -5.9 deg within the capsule's 10 g load limit), ``runs`` runs each (default
+200, seed 0), and writes ``sweep.json`` (range, mode flown, ok fraction, failures by status,
+chute 3-sigma, largest peak load of the ok runs) and ``sweep.png`` (failed fraction and chute
+3-sigma against range, the direct reach's ends) to ``out_dir`` (default
+``results/entry-mode-sweep``). The mode flown is read from the outcome: a direct entry has no
+switch point.
 """
 
 import json
@@ -23,9 +25,9 @@ import gnc_jax as gj  # noqa: E402
 from gnc_jax.guidance.entry.direct import direct_reach, scan_direct  # noqa: E402
 from gnc_jax.schema import ScenarioError  # noqa: E402
 from gnc_jax.systems.capsule import simulation as capsule_sim  # noqa: E402
-from gnc_jax.systems.capsule.reference import nominal_problem  # noqa: E402
+from gnc_jax.systems.capsule.reference import direct_load_limit_g, nominal_problem  # noqa: E402
 
-RANGES_KM = (1400, 1600, 2000, 2400, 2800, 3000, 3200, 3400, 3600, 4000, 5000, 6000)
+RANGES_KM = (1600, 1700, 1800, 2000, 2400, 2800, 3000, 3200, 3400, 3600, 4000, 5000, 6000)
 
 
 def sweep(runs, ranges_km):
@@ -45,13 +47,14 @@ def sweep(runs, ranges_km):
                 failed_by_status=s["failed_by_status"],
                 ok_fraction=1 - s["failed"] / s["runs"],
                 chute_3sigma_km=s.get("chute_3sigma_km"),
+                load_peak_g_max=s.get("load_peak_g_max"),
             )
         )
         print(json.dumps(rows[-1]), flush=True)
     return rows
 
 
-def figure(rows, boundary_km, path):
+def figure(rows, reach_km, path):
     rows = [r for r in rows if "mode" in r]
     fig, (a, b) = plt.subplots(2, 1, sharex=True, figsize=(7, 6))
     x = [r["range_km"] for r in rows]
@@ -63,7 +66,8 @@ def figure(rows, boundary_km, path):
         a.plot(xs, [100 * (1 - r["ok_fraction"]) for r in rr], marker, ms=7, label=f"{mode} entry")
         b.plot(xs, [r["chute_3sigma_km"] for r in rr], marker, ms=7, label=f"{mode} entry")
     for ax in (a, b):
-        ax.axvline(boundary_km, color="r", ls="--", lw=1.2, label="direct reach ends")
+        ax.axvline(reach_km[0], color="r", ls=":", lw=1.2, label="direct reach starts (load)")
+        ax.axvline(reach_km[1], color="r", ls="--", lw=1.2, label="direct reach ends")
         ax.grid(alpha=0.3)
     a.axhline(0.5, color="g", ls=":", lw=1, label="0.5 %")
     b.axhline(5.0, color="g", ls=":", lw=1, label="5 km")
@@ -82,10 +86,12 @@ def main():
     out.mkdir(parents=True, exist_ok=True)
     sc = gj.load_scenario("lunar-skip-entry")
     problem = nominal_problem(sc.config, capsule_sim.build(sc), 0.2)
-    boundary_km = sc.config["entry"]["range_km"] + direct_reach(scan_direct(problem))[1] / 1e3
+    law = gj.get_system("capsule").laws()["skip_entry"]
+    reach = direct_reach(scan_direct(problem, direct_load_limit_g(law, sc.config)))
+    reach_km = [sc.config["entry"]["range_km"] + x / 1e3 for x in reach]
     rows = sweep(runs, ranges)
     (out / "sweep.json").write_text(json.dumps(rows, indent=1))
-    figure(rows, boundary_km, out / "sweep.png")
+    figure(rows, reach_km, out / "sweep.png")
 
 
 if __name__ == "__main__":

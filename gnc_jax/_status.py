@@ -26,6 +26,7 @@ class Status(enum.IntEnum):
     missed = 8  # the run ended outside its delivery tolerance (capsule: a chute point beyond
     # simulation.miss_limit_km; impactor and intercept: a B-plane miss beyond
     # guidance.miss_limit_km)
+    overload = 9  # capsule: the sensed load exceeded simulation.load_limit_g
 
     @classmethod
     def name_of(cls, code: int) -> str:

@@ -240,7 +240,6 @@ def envelope(
     device: str | None = None,
     batch_cells: bool | None = None,
     max_hours: float = MAX_HOURS,
-    **check_options,
 ) -> Envelope:
     """A grid of Monte Carlo studies of ``scenario`` (see the module docstring).
 
@@ -258,7 +257,6 @@ def envelope(
             (a GPU pays its loops' latency once instead of once per cell; a CPU gains nothing).
         max_hours: refuse (before any study) an envelope estimated to take longer (module
             docstring).
-        check_options: passed to the system's pre-check (the capsule: ``load_limit_g``).
     """
     axes = grid_axes(grid)
     if not axes:
@@ -272,9 +270,7 @@ def envelope(
     backend = select(device)
     _checked_cost(scenario, axes, runs, backend, max_hours, progress)
     cells = list(_cell_scenarios(scenario, axes))  # every cell validated before any study
-    checks = system.envelope_check(
-        [c.config for _, c in cells], runs=runs, seed=seed, **check_options
-    )
+    checks = system.envelope_check([c.config for _, c in cells], runs=runs, seed=seed)
     metrics = dict(system.envelope_metrics)
     rows = []
     t_all = time.perf_counter()

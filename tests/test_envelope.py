@@ -185,7 +185,7 @@ def test_constant_bank_flight_matches_scipy():
     range within 2 km (the 2 s RK4 step and the crossing taken at the step's end) and peak
     load within 1 %."""
     sc = gj.load_scenario("lunar-skip-entry", overrides=SHORT_CAPSULE)
-    env = entry_envelope(sc.config, 10.0)
+    env = entry_envelope(sc.config)
     bank = np.radians(100.0)
     f = fly_constant_bank(env.model, env.entry, bank, env.chute_m, env.steps)
     earth = env.model.earth
@@ -229,7 +229,7 @@ def test_constant_bank_flight_matches_scipy():
 def test_cells_outside_the_corridor_are_not_simulated(monkeypatch):
     """A shallow angle that skips out with full lift down and a steep one beyond the load
     limit with full lift up are infeasible before anything runs; the pre-check's verdict is
-    the open-loop flights' own at those angles."""
+    the open-loop flights' own at those angles, at the scenario's simulation.load_limit_g."""
     monkeypatch.setattr(envelope_module, "run_study", lambda *a, **k: pytest.fail("ran"))
     sc = gj.load_scenario("lunar-skip-entry", overrides=SHORT_CAPSULE)
     env = gj.envelope(sc, {"entry.fpa_deg": [-9.0, -4.5]}, runs=2, progress=False)
@@ -237,6 +237,13 @@ def test_cells_outside_the_corridor_are_not_simulated(monkeypatch):
     assert "undershoot" in env.cells[0]["reason"] and "overshoot" in env.cells[1]["reason"]
     lo, hi = env.cells[0]["corridor_undershoot_deg"], env.cells[0]["corridor_overshoot_deg"]
     assert -9.0 < lo < hi < -4.5
-    flights = entry_envelope(sc.config, 10.0).flights([lo, hi, hi + 0.05], [180.0, 0.0])
+    flights = entry_envelope(sc.config).flights([lo, hi, hi + 0.05], [180.0, 0.0])
     assert flights.peak_load_g[0, 1] <= 10.0 and flights.landed[1, 0]
     assert not flights.landed[2, 0]
+    # the undershoot boundary is the scenario's own load limit, the one its runs are held to
+    tight = sc.with_overrides(["simulation.load_limit_g=8"])
+    env = gj.envelope(tight, {"entry.fpa_deg": [-9.0]}, runs=2, progress=False)
+    lo_8 = env.cells[0]["corridor_undershoot_deg"]
+    assert env.cells[0]["load_limit_g"] == 8.0 and lo < lo_8 < hi
+    flights = entry_envelope(tight.config).flights([lo_8, lo_8 - 0.05], [0.0])
+    assert flights.peak_load_g[0, 0] <= 8.0 < flights.peak_load_g[1, 0]

@@ -170,7 +170,6 @@ def cmd_envelope(args) -> int:
     scenario = load_scenario(args.scenario, overrides=args.set or ())
     with _out_dir(args.out):
         _print_warnings(scenario)
-        options = {} if args.load_limit_g is None else {"load_limit_g": args.load_limit_g}
         client = None
         if args.scheduler:
             client = _connect(args.scheduler)
@@ -190,7 +189,6 @@ def cmd_envelope(args) -> int:
                 device=args.device,
                 batch_cells=args.batch_cells,
                 max_hours=args.max_hours,
-                **options,
             )
         finally:
             if client is not None:

@@ -123,12 +123,6 @@ def _add_envelope(sub) -> None:
     q.add_argument("--out", required=True, help="directory for cells.parquet and the PNGs")
     q.add_argument("--set", action="append", metavar="SECTION.FIELD=VALUE", help="override a field")
     q.add_argument(
-        "--load-limit-g",
-        type=_number("--load-limit-g", float, lambda v: 0 < v < 100, "a number in (0, 100)"),
-        default=None,
-        help="capsule: the entry corridor's load limit (default 10 g)",
-    )
-    q.add_argument(
         "--batch-cells",
         action=argparse.BooleanOptionalAction,
         default=None,

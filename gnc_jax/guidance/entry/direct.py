@@ -10,7 +10,8 @@ crossrange inside the speed-scheduled funnel of the second entry.
 The direct reach of a vehicle, entry and target is the interval of chute ranges of the nominal
 flown with a constant bank in ``DIRECT_BANK_BOUNDS_RAD`` that lands without climbing above
 ``DIRECT_APOGEE_M`` after its first pull-up and with a sensed load within
-``DIRECT_LOAD_FRACTION`` of the law's prediction limit (:func:`direct_reach`). The design
+``DIRECT_LOAD_FRACTION`` of the load limit, the smaller of the capsule's load limit and the
+law's prediction limit (:func:`direct_reach`). The design
 (:func:`design_direct`) is the constant bank whose nominal lands on the target, a bounded
 regula-falsi solve inside the scanned pair of banks that brackets it; its
 :class:`~gnc_jax.guidance.entry.reference.ReferenceTrajectory` (:func:`direct_reference`)
@@ -88,7 +89,7 @@ def _constant_bank_flights(problem: NominalProblem, banks, load_limit_g):
 def scan_direct(problem: NominalProblem, load_limit_g: float | None = None) -> DirectScan:
     """The constant-bank nominals every ``DIRECT_SCAN_STEP_RAD`` over ``DIRECT_BANK_BOUNDS_RAD``;
     a direct landing's sensed load stays within ``DIRECT_LOAD_FRACTION`` of ``load_limit_g``
-    (g; the law's
+    (g; the smaller of the capsule's ``simulation.load_limit_g`` and the law's
     :meth:`~gnc_jax.guidance.entry.base.AbstractEntryGuidance.predicted_load_limit_g`,
     ``None``: no limit)."""
     lo, hi = DIRECT_BANK_BOUNDS_RAD
@@ -145,7 +146,7 @@ def direct_conditions(scan: DirectScan) -> str:
         ""
         if math.isinf(scan.load_limit_g)
         else f", loads up to {scan.load_limit_g:.3g} g = {DIRECT_LOAD_FRACTION:.0%} of the "
-        "law's prediction limit"
+        "load limit"
     )
     return (
         f"constant banks {b_lo:.0f}..{b_hi:.0f} deg, no climb above "

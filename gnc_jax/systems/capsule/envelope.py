@@ -28,9 +28,6 @@ from ...params import from_scenario, schema_of
 from . import simulation as capsule_sim
 from .params import Entry, SimulationParams, capsule_params
 
-LOAD_LIMIT_G = 10.0
-"""Default load limit of the corridor's undershoot boundary (Apollo's lunar-return design
-limit; seed 003 gives none). ``gnc-jax envelope --load-limit-g`` changes it."""
 FOOTPRINT_MARGIN = 0.1  # the acceptance's margin: 10 % of a footprint's width from each edge
 FOOTPRINT_TAIL = 0.005  # the dispersed footprint: the ends all but 0.5 % of the runs reach
 # runs whose footprints the envelope pre-check flies at most (the first ones of the study: the
@@ -39,14 +36,20 @@ FOOTPRINT_TAIL = 0.005  # the dispersed footprint: the ends all but 0.5 % of the
 FOOTPRINT_RUNS_MAX = 2000
 
 
-def entry_envelope(config: dict, load_limit_g: float) -> EntryEnvelope:
+def entry_envelope(config: dict) -> EntryEnvelope:
     """The entry corridor and footprint (:class:`~gnc_jax.guidance.entry.corridor.EntryEnvelope`)
-    of a validated capsule configuration's nominal vehicle, atmosphere and entry."""
+    of a validated capsule configuration's nominal vehicle, atmosphere and entry; the
+    corridor's undershoot boundary at its ``simulation.load_limit_g``, the load beyond which
+    a run reads ``overload``."""
     p = capsule_params(config)
     earth, vehicle, atmosphere, entry = capsule_sim.nominal_models(p)
     model = EntryModel(vehicle, earth, atmosphere)
     return EntryEnvelope(
-        model, entry, p.entry.chute_altitude_m, p.simulation.max_time_s, load_limit_g
+        model,
+        entry,
+        p.entry.chute_altitude_m,
+        p.simulation.max_time_s,
+        float(p.simulation.load_limit_g),
     )
 
 
@@ -139,10 +142,11 @@ def reachability(footprints_km: np.ndarray, range_km: float) -> dict[str, float]
     )
 
 
-def check_cells(configs: list[dict], load_limit_g=None, runs=None, seed=None) -> list[dict]:
+def check_cells(configs: list[dict], runs=None, seed=None) -> list[dict]:
     """Entry corridor pre-check (:mod:`gnc_jax.guidance.entry.corridor`): a cell whose entry
     flight-path angle skips out even with full lift down (overshoot) or exceeds the load
-    limit even with full lift up (undershoot) is infeasible. Columns: the corridor's ends
+    limit (the cell's ``simulation.load_limit_g``) even with full lift up (undershoot) is
+    infeasible. Columns: the corridor's ends
     and the nominal vehicle's reachable footprint (constant-bank extreme chute ranges) at
     the cell's angle, whether the target lies inside it (``in_footprint``) and inside it
     with ``FOOTPRINT_MARGIN`` of its width to spare (``in_footprint_margin``).
@@ -153,11 +157,10 @@ def check_cells(configs: list[dict], load_limit_g=None, runs=None, seed=None) ->
     computed once per entry angle and vehicle, shared by the ranges) and the columns of
     :func:`reachability`, with ``footprint_runs`` (the study's first runs, at most
     ``FOOTPRINT_RUNS_MAX``) and ``footprint_s`` (wall time of the angle's footprints, s)."""
-    limit = LOAD_LIMIT_G if load_limit_g is None else float(load_limit_g)
     field = schema_of(Entry)["fpa_deg"]  # its declared range bounds the corridor search
     out, corridors, runs_fp = [], {}, {}
     for cfg in configs:
-        env = entry_envelope(cfg, limit)
+        env = entry_envelope(cfg)
         fpa = cfg["entry"]["fpa_deg"]
         # the corridor depends on everything but the angle and the target's range
         key = repr({k: v for k, v in cfg.items() if k != "entry"}) + repr(
@@ -172,14 +175,14 @@ def check_cells(configs: list[dict], load_limit_g=None, runs=None, seed=None) ->
         if not feasible and not cor.undershoot_deg <= cor.overshoot_deg:
             reason = (
                 f"no entry angle in [{field.lo:g}, {field.hi:g}] deg is both captured with "
-                f"full lift down and within {limit:g} g with full lift up at this speed and "
-                "vehicle"
+                f"full lift down and within {env.load_limit_g:g} g with full lift up at this "
+                "speed and vehicle"
             )
         elif not feasible:
             side = (
                 "overshoot (skips out with full lift down)"
                 if fpa > cor.overshoot_deg
-                else (f"undershoot (above {limit:g} g with full lift up)")
+                else (f"undershoot (above {env.load_limit_g:g} g with full lift up)")
             )
             reason = (
                 f"outside the entry corridor {cor.undershoot_deg:.2f} .. "
@@ -191,7 +194,7 @@ def check_cells(configs: list[dict], load_limit_g=None, runs=None, seed=None) ->
         columns = dict(
             corridor_undershoot_deg=cor.undershoot_deg,
             corridor_overshoot_deg=cor.overshoot_deg,
-            load_limit_g=limit,
+            load_limit_g=env.load_limit_g,
             footprint_min_km=lo,
             footprint_max_km=hi,
             in_footprint=bool(lo <= rng <= hi),
@@ -236,8 +239,7 @@ def draw_overlay(ax, envelope, x_key: str, y_key: str | None) -> None:
         return
     fpas = np.asarray(envelope.axes["entry.fpa_deg"], float)
     dense = np.linspace(fpas.min(), fpas.max(), 25)
-    limit = c0.get("load_limit_g", LOAD_LIMIT_G)
-    fp = entry_envelope(envelope.scenario.config, limit).footprints(dense)
+    fp = entry_envelope(envelope.scenario.config).footprints(dense)
     lim = ax.get_ylim() if vertical else ax.get_xlim()
     for k, name in ((0, "footprint: shortest range"), (1, "footprint: longest range")):
         xy = (dense, fp[:, k]) if vertical else (fp[:, k], dense)

@@ -347,6 +347,18 @@ class SimulationParams(eqx.Module):
         "paper's requirement is 2.5 km; the default is set well outside a converged law's "
         "scatter so that it flags failures without truncating the statistics)",
     )
+    load_limit_g: Scalar = param(
+        10.0,
+        section="simulation",
+        lo=0.0,
+        lo_open=True,
+        hi=100.0,
+        units="g",
+        doc="largest sensed load a run may see: a run whose peak load exceeds it reads "
+        "overload and is left out of the statistics (10 g, Apollo's lunar-return design "
+        "limit; seed 003 gives none); also the undershoot boundary of the entry corridor "
+        "(gnc-jax envelope)",
+    )
 
 
 PARAMETER_MODULES = (

@@ -78,9 +78,18 @@ def law_mission(
     if load is None:
         return EntryMission(chute_altitude_m=sim.chute_altitude_m)
     reference, mode = mode_reference(
-        config, sim, load, law.entry_mode_of(section), law.predicted_load_limit_g(section)
+        config, sim, load, law.entry_mode_of(section), direct_load_limit_g(law, config)
     )
     return EntryMission(chute_altitude_m=sim.chute_altitude_m, reference=reference, entry_mode=mode)
+
+
+def direct_load_limit_g(law: type[AbstractEntryGuidance], config: dict) -> float:
+    """The largest load (g) a direct landing of the law class ``law`` may see in a validated
+    capsule configuration: the smaller of the capsule's ``simulation.load_limit_g`` (beyond it
+    a run reads ``overload``) and the largest load the law's predictions fly."""
+    predicted = law.predicted_load_limit_g(config["guidance"][law.law_name])
+    limit = float(config["simulation"]["load_limit_g"])
+    return limit if predicted is None else min(limit, float(predicted))
 
 
 def mode_reference(
@@ -94,8 +103,9 @@ def mode_reference(
     second-entry reference of :func:`scenario_reference`), "direct" (the constant-bank direct
     design of :mod:`gnc_jax.guidance.entry.direct`), or "auto": "direct" where the target
     lies inside the nominal vehicle's direct reach, else "skip" (a skip that cannot reach
-    either is refused with both intervals). ``load_limit_g``: the largest load (g) the law's
-    predictions fly (``None``: none), which bounds the direct reach."""
+    either is refused with both intervals). ``load_limit_g``: the largest load (g) a direct
+    landing may see (``None``: none), which bounds the direct reach: the smaller of the
+    capsule's ``simulation.load_limit_g`` and the largest load the law's predictions fly."""
     if mode == "skip":
         return scenario_reference(config, sim, switch_load_g), "skip"
     problem = nominal_problem(config, sim, switch_load_g)

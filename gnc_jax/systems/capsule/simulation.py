@@ -83,6 +83,7 @@ class CapsuleSimulation(eqx.Module):
     hold_bank_rad: Scalar  # attitude held before guidance starts
     chute_altitude_m: Scalar  # the chute deploys (the flight ends) below it
     miss_limit_m: Scalar  # delivery tolerance: a larger downrange or crossrange miss reads missed
+    load_limit_g: Scalar  # a larger sensed peak load reads overload
     dt_s: float = eqx.field(static=True, default=0.5)
     substeps: int = eqx.field(static=True, default=2)  # truth steps per control step
     n_control: int = eqx.field(static=True, default=2400)
@@ -422,7 +423,8 @@ def _outcome(
     """Chute-point errors against the nominal entry -> target track, loads, the law's log.
 
     Status, by precedence: ``skip_out`` (climbed above the law's skip-out altitude),
-    ``time_out`` (no chute crossing within ``max_time_s``), ``missed`` (a downrange or
+    ``time_out`` (no chute crossing within ``max_time_s``), ``overload`` (a sensed peak load
+    beyond ``load_limit_g``), ``missed`` (a downrange or
     crossrange miss beyond ``miss_limit_m``, the delivery tolerance, whether its corrector
     converged or not; a dispersed vehicle that cannot reach the target ends here), then
     ``no_convergence`` (the last corrector cycle failed, the chute point within the
@@ -463,6 +465,7 @@ def _outcome(
         (
             (log.skipped_out, Status.skip_out),
             (~c.truth.done, Status.time_out),
+            (f.load_peak > sim.load_limit_g, Status.overload),
             (
                 jnp.maximum(jnp.abs(along), jnp.abs(cross)) * r_e_km * 1e3 > sim.miss_limit_m,
                 Status.missed,
@@ -510,6 +513,7 @@ def build_from_config(cfg: dict) -> CapsuleSimulation:
         hold_bank_rad=p.guidance.hold_bank_rad,
         chute_altitude_m=p.entry.chute_altitude_m,
         miss_limit_m=p.simulation.miss_limit_m,
+        load_limit_g=p.simulation.load_limit_g,
         dt_s=counts.dt_s,
         substeps=counts.substeps,
         n_control=counts.n_control,

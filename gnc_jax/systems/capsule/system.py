@@ -28,7 +28,7 @@ from ..base import (
     register_system,
 )
 from . import simulation as capsule_sim
-from .envelope import LOAD_LIMIT_G, check_cells, draw_overlay
+from .envelope import check_cells, draw_overlay
 from .figures import capsule_figures
 from .params import PARAMETER_MODULES, Entry, GuidanceParams, SimulationParams, loop_counts
 from .reference import law_mission
@@ -140,9 +140,6 @@ class CapsuleSystem(AbstractSystem):
         "failed_fraction": "failed fraction",
         "load_peak_g_max": "peak load, largest (g)",
     }
-    LOAD_LIMIT_G: ClassVar[float] = LOAD_LIMIT_G
-    """Default load limit of the corridor's undershoot boundary (``gnc-jax envelope
-    --load-limit-g`` changes it)."""
 
     # measured with benchmarks/capsule.py (per-run time against the chunk size): the lowest
     # per-run time is at 256 runs per device, whose working set (about 2 kB per run of
@@ -191,10 +188,10 @@ class CapsuleSystem(AbstractSystem):
         cycles = FIRST_ENTRY_FRACTION * flight_s / clock.pc_period_s
         return float(truth + cycles * per_cycle)
 
-    def envelope_check(self, configs, load_limit_g=None, runs=None, seed=None, **options):
+    def envelope_check(self, configs, runs=None, seed=None, **options):
         """The entry corridor and footprint pre-check of
         :func:`~gnc_jax.systems.capsule.envelope.check_cells`."""
-        return check_cells(configs, load_limit_g, runs, seed)
+        return check_cells(configs, runs, seed)
 
     def envelope_overlay(self, ax, envelope, x_key, y_key):
         """The corridor and footprints of

@@ -15,7 +15,12 @@ from gnc_jax.guidance.entry import direct
 from gnc_jax.guidance.entry.base import flight_variables
 from gnc_jax.schema import ScenarioError
 from gnc_jax.systems.capsule import simulation as capsule_sim
-from gnc_jax.systems.capsule.reference import law_mission, mode_reference, nominal_problem
+from gnc_jax.systems.capsule.reference import (
+    direct_load_limit_g,
+    law_mission,
+    mode_reference,
+    nominal_problem,
+)
 
 # every dispersion of the capsule off (its scenario schema lists them)
 ZERO = [f"dispersions.{k}=0.0" for k in gj.get_system("capsule").schema()["dispersions"]]
@@ -28,8 +33,13 @@ def _setup(range_km, overrides=()):
 
 
 def _law_load_limit_g(sc) -> float:
+    """The load limit of a direct landing: the smaller of the capsule's and the law's
+    prediction limit."""
     law = gj.get_system("capsule").laws()["skip_entry"]
-    return law.predicted_load_limit_g(sc.config["guidance"]["skip_entry"])
+    predicted = law.predicted_load_limit_g(sc.config["guidance"]["skip_entry"])
+    limit = min(predicted, sc.config["simulation"]["load_limit_g"])
+    assert direct_load_limit_g(law, sc.config) == limit
+    return limit
 
 
 def _track_range_km(u, start, azimuth, r_e_km):
@@ -123,16 +133,24 @@ def test_refusals_name_the_field_and_the_interval():
     msg = str(e.value)
     assert msg.startswith("entry.range_km: 800 km") and "\n" not in msg
     assert f"a direct entry reaches {lo:.0f} .. {hi:.0f} km" in msg
-    # 1200 km: landed by constant banks steeper than 112 deg, whose loads (up to 45 g) the
-    # law's predictions end as dives; the law's reach starts beyond it
-    sc, sim, _ = _setup(1200.0, ["guidance.skip_entry.entry_mode=direct"])
+    # 1200 km: landed by constant banks steeper than 112 deg, whose loads (up to 45 g) exceed
+    # the capsule's 10 g limit and the law's predictions end as dives; the reach starts beyond
+    # it, at 90 % of the smaller limit: the capsule's by default, the law's for a capsule
+    # allowed more than the law's 20 g
     law = gj.get_system("capsule").laws()["skip_entry"]
-    with pytest.raises(ScenarioError) as e:
-        law_mission(law, sc.config, sim)
-    msg = str(e.value)
-    assert msg.startswith("entry.range_km: 1200 km; allowed: ") and "\n" not in msg
-    short = float(re.search(r"allowed: (\d+) \.\. ", msg).group(1))
-    assert short > 1200.0 and "loads up to 18 g" in msg
+    starts = []
+    for limit_g, direct_g in ((10.0, 9), (30.0, 18)):
+        sc, sim, _ = _setup(
+            1200.0,
+            ["guidance.skip_entry.entry_mode=direct", f"simulation.load_limit_g={limit_g}"],
+        )
+        with pytest.raises(ScenarioError) as e:
+            law_mission(law, sc.config, sim)
+        msg = str(e.value)
+        assert msg.startswith("entry.range_km: 1200 km; allowed: ") and "\n" not in msg
+        starts.append(float(re.search(r"allowed: (\d+) \.\. ", msg).group(1)))
+        assert starts[-1] > 1200.0 and f"loads up to {direct_g} g" in msg
+    assert starts[0] > starts[1]
     with pytest.raises(ScenarioError) as e:
         gj.load_scenario("lunar-skip-entry", overrides=["guidance.skip_entry.entry_mode=glide"])
     msg = str(e.value)

@@ -67,7 +67,7 @@ def test_zero_dispersions_give_the_nominal_footprint_in_every_run(no_design):
     fpa = sc.config["entry"]["fpa_deg"]
     fp = capsule_envelope.dispersed_footprints(sc.config, 3, seed=5)
     assert np.all(fp == fp[0])  # every run the same
-    env = capsule_envelope.entry_envelope(sc.config, 10.0)
+    env = capsule_envelope.entry_envelope(sc.config)
     lo, hi = env.footprint(fpa)
     assert fp[0, 0] == pytest.approx(lo, rel=1e-6) and fp[0, 1] == pytest.approx(hi, rel=1e-2)
     f = env.flights([fpa], FOOTPRINT_BANKS_DEG)

@@ -217,7 +217,7 @@ def _miss_km(o):
     return np.maximum(np.abs(o["downrange_err_km"]), np.abs(o["crossrange_err_km"]))
 
 
-def test_a_miss_beyond_the_tolerance_reads_missed_outside_the_statistics(paper):
+def test_a_miss_or_a_load_beyond_its_limit_reads_failed_outside_the_statistics(paper):
     study = gj.run_study(paper, runs=4, progress=False)
     assert (study.status == Status.ok).all()
     miss = _miss_km(study.outcomes)
@@ -236,6 +236,15 @@ def test_a_miss_beyond_the_tolerance_reads_missed_outside_the_statistics(paper):
     np.testing.assert_allclose(
         s["downrange_err_km"]["mean"], np.mean(study.outcomes["downrange_err_km"][ok])
     )
+    # a run whose peak load exceeds the capsule's load limit reads overload, ahead of a miss
+    load = study.outcomes["load_peak_g"]
+    limit_g = float(np.median(load))
+    loaded = gj.run_study(
+        paper.with_overrides([f"simulation.load_limit_g={limit_g}"]), runs=4, progress=False
+    )
+    np.testing.assert_array_equal(loaded.outcomes["load_peak_g"], load)
+    np.testing.assert_array_equal(loaded.status, np.where(load > limit_g, Status.overload, 0))
+    assert loaded.summary()["failed_by_status"] == {"overload": int((load > limit_g).sum())}
     # the cost model's predictor term against the predictor steps the runs logged
     system = paper.system
     cfg = paper.config
@@ -269,18 +278,24 @@ def test_a_miss_beyond_the_tolerance_reads_missed_outside_the_statistics(paper):
             Status.no_convergence,
         ),
         # a corrector saturated at its smallest bank (100 deg, lift down) in every cycle: the
-        # runs cannot reach the target and land beyond the delivery tolerance, which takes
-        # precedence over the failed corrector
-        (["guidance.skip_entry.bank_min_deg=100"], Status.missed),
+        # runs dive beyond the capsule's 10 g load limit, which takes precedence over the miss
+        (["guidance.skip_entry.bank_min_deg=100"], Status.overload),
+        # allowed the load, they cannot reach the target and land beyond the delivery
+        # tolerance, which takes precedence over the failed corrector
+        (["guidance.skip_entry.bank_min_deg=100", "simulation.load_limit_g=100"], Status.missed),
     ],
 )
 def test_degraded_runs_never_read_ok(paper, overrides, status):
     # 4 runs, as in the test above: a bank bound is an argument of that compiled study
-    study = gj.run_study(paper.with_overrides(overrides), runs=4, progress=False)
+    scenario = paper.with_overrides(overrides)
+    study = gj.run_study(scenario, runs=4, progress=False)
     np.testing.assert_array_equal(study.status, status)
     assert study.summary()["failed"] == 4
     o = study.outcomes
-    if status != Status.skip_out:  # every corrector cycle failed; the miss sets the status
+    if status != Status.skip_out:  # every corrector cycle failed; the load or miss decides
         np.testing.assert_array_equal(o["corrector_failures"], o["pc_cycles"])
-        beyond = _miss_km(o) > paper.config["simulation"]["miss_limit_km"]
-        np.testing.assert_array_equal(beyond, status == Status.missed)
+        limits = scenario.config["simulation"]
+        beyond = _miss_km(o) > limits["miss_limit_km"]
+        np.testing.assert_array_equal(beyond, status != Status.no_convergence)
+        overloaded = o["load_peak_g"] > limits["load_limit_g"]
+        np.testing.assert_array_equal(overloaded, status == Status.overload)
