@@ -25,6 +25,7 @@ from ...guidance.entry.corridor import (
     track_footprints,
 )
 from ...params import from_scenario, schema_of
+from ...schema import ScenarioError
 from . import simulation as capsule_sim
 from .params import Entry, SimulationParams, capsule_params
 
@@ -50,6 +51,31 @@ def entry_envelope(config: dict) -> EntryEnvelope:
         p.entry.chute_altitude_m,
         p.simulation.max_time_s,
         float(p.simulation.load_limit_g),
+    )
+
+
+def require_within_load_limit(config: dict) -> None:
+    """Refuse, before any design, an entry at which the nominal vehicle's full-lift-up flight
+    already peaks above ``simulation.load_limit_g``: no bank history keeps such an entry
+    within the limit, so every run would read ``overload``. The one line names
+    ``entry.fpa_deg`` with the entry corridor's undershoot boundary (:func:`entry_envelope`,
+    the envelope pre-check's), the steepest angle that full lift up keeps within the limit."""
+    env = entry_envelope(config)
+    fpa = config["entry"]["fpa_deg"]
+    load = float(env.flights([fpa], [0.0]).peak_load_g[0, 0])
+    if load <= env.load_limit_g:
+        return
+    field = schema_of(Entry)["fpa_deg"]  # its declared range bounds the corridor search
+    steepest = env.corridor(field.lo, field.hi, 0.05).undershoot_deg
+    allowed = (
+        f"no entry angle in [{field.lo:g}, {field.hi:g}] deg at this speed and vehicle"
+        if math.isnan(steepest)
+        else f"{steepest:.2f} deg or shallower at this speed and vehicle"
+    )
+    raise ScenarioError(
+        f"entry.fpa_deg: {fpa:g} deg; allowed: {allowed} (full lift up peaks at {load:.3g} g "
+        f"here, above simulation.load_limit_g = {env.load_limit_g:g} g: every run would read "
+        "overload)"
     )
 
 

@@ -28,7 +28,7 @@ from ..base import (
     register_system,
 )
 from . import simulation as capsule_sim
-from .envelope import check_cells, draw_overlay
+from .envelope import check_cells, draw_overlay, require_within_load_limit
 from .figures import capsule_figures
 from .params import PARAMETER_MODULES, Entry, GuidanceParams, SimulationParams, loop_counts
 from .reference import law_mission
@@ -200,7 +200,10 @@ class CapsuleSystem(AbstractSystem):
 
     def build(self, scenario):
         """The simulation data and the law, handed the mission and the reference designed for
-        it (:func:`~gnc_jax.systems.capsule.reference.law_mission`) as its ``ctx``."""
+        it (:func:`~gnc_jax.systems.capsule.reference.law_mission`) as its ``ctx``; an entry
+        too steep for the load limit is refused first
+        (:func:`~gnc_jax.systems.capsule.envelope.require_within_load_limit`)."""
+        require_within_load_limit(scenario.config)
         config, sim = scenario.config, capsule_sim.build(scenario)
         law = self.laws()[config["guidance"]["law"]]
         return sim, self.build_law(config, law_mission(law, config, sim))

@@ -13,6 +13,7 @@ import gnc_jax as gj
 from gnc_jax import cli
 from gnc_jax._status import Status
 from gnc_jax.guidance.entry import cache, design, nominal, reach
+from gnc_jax.systems.capsule import envelope as capsule_envelope
 
 
 @pytest.fixture(scope="module")
@@ -158,6 +159,26 @@ def test_uncaptured_entry_angle_is_refused_before_the_design_with_the_corridor(
         np.degrees(reach.profile_bank_span()),
     )
     assert np.isfinite(landed).any()
+
+
+def test_an_entry_too_steep_for_the_load_limit_is_refused_before_the_design(paper, no_design):
+    """At -7.5 deg the nominal capsule's full-lift-up flight already peaks above 10 g: no bank
+    keeps a run within the limit, so the entry is refused in one line naming entry.fpa_deg,
+    with the corridor's undershoot boundary as the envelope pre-check computes it; a flight
+    at that boundary stays within the limit. Allowed 12 g, the same entry passes the check."""
+    steep = paper.with_overrides(["entry.fpa_deg=-7.5", "entry.range_km=3000"])
+    with pytest.raises(gj.ScenarioError) as e:
+        gj.build(steep)
+    text = _one_line(e)
+    assert text.startswith("entry.fpa_deg: -7.5 deg; allowed: ") and "overload" in text
+    env = capsule_envelope.entry_envelope(steep.config)
+    boundary = env.corridor(-12.0, -2.0, 0.05).undershoot_deg
+    assert f"allowed: {boundary:.2f} deg or shallower" in text
+    loads = env.flights([-7.5, boundary], [0.0]).peak_load_g[:, 0]
+    assert loads[0] > 10.0 >= loads[1]
+    capsule_envelope.require_within_load_limit(
+        steep.with_overrides(["simulation.load_limit_g=12"]).config
+    )
 
 
 def test_a_design_that_misses_the_target_is_refused(paper):
