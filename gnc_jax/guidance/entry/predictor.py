@@ -40,7 +40,7 @@ from .base import (
     flight_variables,
     hermite_crossing,
 )
-from .phases import apogee_gate, is_direct, skip_switch, switch_by_speed
+from .phases import apogee_gate, is_direct, load_relief, skip_switch, switch_by_speed
 from .state import SkipEntryState
 
 
@@ -204,8 +204,10 @@ def prediction_origin(law, y: EntryState, t, pulled_up, model, dip_altitude_m=No
 def predictor_start(law, o: _Origin, sigma_0, active, model) -> _PredictorState:
     """The loop state of a prediction of ``sigma_0`` before its first step (an inactive
     one is finished: it takes no step)."""
+    p = o.point
     cos_b = jnp.cos(profile(law, sigma_0, o.speed_mps, o.speed_mps))
-    dy, _ = model.vertical_plane_xyz(o.point.y, cos_b, density=o.density)
+    cos_b = relieved(law, cos_b, o.pulled_up, p.ng, p.altitude_m, p.hdot_mps, o.density, model)
+    dy, _ = model.vertical_plane_xyz(p.y, cos_b, density=o.density)
     f = jnp.asarray(False)
     return _PredictorState(
         now=o.point,
@@ -299,10 +301,16 @@ def predictor_step(law, c: _PredictorState, sigma_0, v_0, model) -> _PredictorSt
 
     def field(t, y, _):
         if law.predictor_bank == "stage":  # the profile at this stage's speed
+            # (the load relief judged at the step's start, held over the step)
+            now = c.now
+            density = model.atmosphere.density(now.altitude_m)
 
             def rhs(y):
                 speed = altitude_speed_hdot(y, model.earth)[1]
                 cos_b = predicted_cos_bank(law, c.second, sigma_0, v_0, speed, model)
+                cos_b = relieved(
+                    law, cos_b, c.pulled_up, now.ng, now.altitude_m, now.hdot_mps, density, model
+                )
                 return model.vertical_plane_xyz(y, cos_b)[0]
 
             return once(rhs, y)
@@ -336,6 +344,7 @@ def predictor_step(law, c: _PredictorState, sigma_0, v_0, model) -> _PredictorSt
         pulled,
         kepler,
         second,
+        density1,
     )
     dy1, _ = model.vertical_plane_xyz(y1, cos_b1, density=density1)
     return _PredictorState(
@@ -391,8 +400,10 @@ def _phases(law, c: _PredictorState, alt1, hdot1, ng1, speed1):
 
 def _next_bank(law, c: _PredictorState, dt, sigma_0, v_0, model, *end):
     """Cosine of the bank :func:`predictor_step` flies in the next step, from the step's end
-    point ``end`` = ``(alt1, hdot1, ng1, speed1, dip, pulled, kepler, second)``."""
-    alt1, hdot1, ng1, speed1, dip, pulled, kepler, second = end
+    point ``end`` = ``(alt1, hdot1, ng1, speed1, dip, pulled, kepler, second, density1)``:
+    the profile's (:func:`predicted_cos_bank`, blended at an apogee switch), or full lift up
+    where the law's load relief would fly it (:func:`~.phases.load_relief`)."""
+    alt1, hdot1, ng1, speed1, dip, pulled, kepler, second, density1 = end
     speed_bank = speed1
     if law.predictor_bank == "midpoint":  # the speed half-way through the next step
         dt_next = law.predictor_dt_s
@@ -417,7 +428,13 @@ def _next_bank(law, c: _PredictorState, dt, sigma_0, v_0, model, *end):
             second,
             model,
         )
-    return cos_b1
+    return relieved(law, cos_b1, pulled, ng1, alt1, hdot1, density1, model)
+
+
+def relieved(law, cos_bank, pulled, ng, altitude_m, hdot_mps, density, model):
+    """``cos_bank``, or 1 (full lift up) where the law's load relief flies it."""
+    relief = load_relief(law, pulled, ng, altitude_m, hdot_mps, density, model.atmosphere)
+    return cos_bank if relief is None else jnp.where(relief, 1.0, cos_bank)
 
 
 def apogee_blend(

@@ -3,6 +3,7 @@ against Earth-relative speed with its switch state and the sensitivities of eq. 
 Designed offline by :mod:`gnc_jax.guidance.entry.design` (kept by
 :mod:`gnc_jax.guidance.entry.cache`) for each scenario by the capsule system."""
 
+import math
 from typing import NamedTuple
 
 import equinox as eqx
@@ -119,8 +120,11 @@ class EntryMission(NamedTuple):
             ``None``), else ``None``.
         entry_mode: the mode the reference was designed for, "skip" or "direct"
             (:mod:`gnc_jax.guidance.entry.direct`).
+        load_limit_g: the capsule's load limit (``simulation.load_limit_g``), g: a run whose
+            sensed load exceeds it reads ``overload``.
     """
 
     chute_altitude_m: Scalar
     reference: ReferenceTrajectory | None = None
     entry_mode: str = "skip"
+    load_limit_g: float = math.inf

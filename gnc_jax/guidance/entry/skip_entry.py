@@ -21,6 +21,9 @@ Phases (seed 003 §2, Fig. 1):
    at the switch point by eqs. 16-17 (switch-point compensation).
 
 The sign of the bank follows bank reversals inside a crossrange funnel that narrows with speed.
+In the direct mode a load relief (not in the seed: ``load_relief``) flies full lift up after
+the first pull-up while the sensed load, extrapolated a few seconds ahead, nears the
+capsule's load limit; the predictor flies the same rule.
 Phase changes are hard logic (evaluation); gradients of the tracking gains flow through the
 second entry, which has no discrete logic apart from the reversals.
 
@@ -63,7 +66,7 @@ from .base import (
     flight_variables,
 )
 from .corrector import corrector_cycle
-from .phases import bank_sign, hold_bank_rad, is_direct, phase_events
+from .phases import bank_sign, hold_bank_rad, is_direct, load_relief, phase_events
 from .predictor import filter_ratios, profile, steps_per_cycle
 from .reference import EntryMission
 from .skip_entry_params import SkipEntryParameters
@@ -117,6 +120,7 @@ class SkipEntryGuidance(SkipEntryParameters):
             section,
             reference=ctx.reference,
             chute_altitude_m=ctx.chute_altitude_m,
+            load_limit_g=jnp.asarray(ctx.load_limit_g, float),
             direct=ctx.entry_mode == "direct",
         )
 
@@ -195,6 +199,11 @@ class SkipEntryGuidance(SkipEntryParameters):
                 jnp.where(phase == 2, state.bank_mag, track_mag),
             ),
         )
+        atmosphere = ctx.model.atmosphere
+        density = atmosphere.density(fv.altitude_m)
+        relief = load_relief(self, pulled, ng, fv.altitude_m, fv.hdot_mps, density, atmosphere)
+        if relief is not None:  # full lift up: the magnitude 0, whatever the sign
+            mag = jnp.where(live & (phase != 0) & relief, 0.0, mag)
         chi_now = earth.equatorial_radius_m * crossrange_to_target(y.r, v_rel, target)
         sign, reverse = bank_sign(self, state, phase, fv, chi_switch, chi_now, live, pulled, ng)
 

@@ -70,17 +70,23 @@ def law_mission(
     law: type[AbstractEntryGuidance], config: dict, sim: CapsuleSimulation
 ) -> EntryMission:
     """What the capsule system hands the law class ``law`` as the ``ctx`` of its
-    ``from_config`` (SI units): the chute altitude of ``sim`` and, for a law that tracks a
-    reference (whose ``reference_switch_load_g`` is not ``None``), the reference of
-    :func:`scenario_reference`."""
+    ``from_config`` (SI units): the chute altitude of ``sim``, the capsule's load limit and,
+    for a law that tracks a reference (whose ``reference_switch_load_g`` is not ``None``),
+    the reference of :func:`scenario_reference`."""
     section = config["guidance"][law.law_name]
     load = law.reference_switch_load_g(section)
+    limit = float(config["simulation"]["load_limit_g"])
     if load is None:
-        return EntryMission(chute_altitude_m=sim.chute_altitude_m)
+        return EntryMission(chute_altitude_m=sim.chute_altitude_m, load_limit_g=limit)
     reference, mode = mode_reference(
         config, sim, load, law.entry_mode_of(section), direct_load_limit_g(law, config)
     )
-    return EntryMission(chute_altitude_m=sim.chute_altitude_m, reference=reference, entry_mode=mode)
+    return EntryMission(
+        chute_altitude_m=sim.chute_altitude_m,
+        reference=reference,
+        entry_mode=mode,
+        load_limit_g=limit,
+    )
 
 
 def direct_load_limit_g(law: type[AbstractEntryGuidance], config: dict) -> float:
