@@ -99,15 +99,18 @@ def phase_events(law, state: SkipEntryState, fv: FlightVariables, ng, live):
     return phase, pulled, dip, PhaseEvents(start, to_kepler, to_track)
 
 
-def load_relief(law, pulled, ng, altitude_m, hdot_mps, density, atmosphere):
+def load_relief(law, pulled, ng, altitude_m, hdot_mps, atmosphere, density=None):
     """Whether the direct entry flies full lift up for load relief (``load_relief``): after
     the first pull-up, while the sensed load ``ng`` (g) extrapolated ``load_relief_lead_s``
     ahead (by the ``atmosphere``'s density ratio between ``altitude_m``, where it is
-    ``density``, and the altitude the sink rate ``hdot_mps`` reaches in that time) exceeds
-    ``load_relief_fraction`` of the capsule's load limit. Shared by the law and its
-    predictor; ``None`` (static) when the relief is off or the law flies a skip."""
+    ``density``, evaluated here when ``None``, and the altitude the sink rate ``hdot_mps``
+    reaches in that time) exceeds ``load_relief_fraction`` of the capsule's load limit.
+    Shared by the law and its predictor; ``None`` (static) when the relief is off or the law
+    flies a skip."""
     if law.load_relief == "off" or not is_direct(law):
         return None
+    if density is None:
+        density = atmosphere.density(altitude_m)
     ahead = atmosphere.density(altitude_m + jnp.minimum(hdot_mps, 0.0) * law.load_relief_lead_s)
     limit = law.load_relief_fraction * law.load_limit_g
     return pulled & (ng * ahead > limit * density)

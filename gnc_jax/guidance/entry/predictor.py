@@ -206,7 +206,7 @@ def predictor_start(law, o: _Origin, sigma_0, active, model) -> _PredictorState:
     one is finished: it takes no step)."""
     p = o.point
     cos_b = jnp.cos(profile(law, sigma_0, o.speed_mps, o.speed_mps))
-    cos_b = relieved(law, cos_b, o.pulled_up, p.ng, p.altitude_m, p.hdot_mps, o.density, model)
+    cos_b = relieved(law, cos_b, o.pulled_up, p.ng, p.altitude_m, p.hdot_mps, model, o.density)
     dy, _ = model.vertical_plane_xyz(p.y, cos_b, density=o.density)
     f = jnp.asarray(False)
     return _PredictorState(
@@ -303,13 +303,12 @@ def predictor_step(law, c: _PredictorState, sigma_0, v_0, model) -> _PredictorSt
         if law.predictor_bank == "stage":  # the profile at this stage's speed
             # (the load relief judged at the step's start, held over the step)
             now = c.now
-            density = model.atmosphere.density(now.altitude_m)
 
             def rhs(y):
                 speed = altitude_speed_hdot(y, model.earth)[1]
                 cos_b = predicted_cos_bank(law, c.second, sigma_0, v_0, speed, model)
                 cos_b = relieved(
-                    law, cos_b, c.pulled_up, now.ng, now.altitude_m, now.hdot_mps, density, model
+                    law, cos_b, c.pulled_up, now.ng, now.altitude_m, now.hdot_mps, model
                 )
                 return model.vertical_plane_xyz(y, cos_b)[0]
 
@@ -428,12 +427,13 @@ def _next_bank(law, c: _PredictorState, dt, sigma_0, v_0, model, *end):
             second,
             model,
         )
-    return relieved(law, cos_b1, pulled, ng1, alt1, hdot1, density1, model)
+    return relieved(law, cos_b1, pulled, ng1, alt1, hdot1, model, density1)
 
 
-def relieved(law, cos_bank, pulled, ng, altitude_m, hdot_mps, density, model):
-    """``cos_bank``, or 1 (full lift up) where the law's load relief flies it."""
-    relief = load_relief(law, pulled, ng, altitude_m, hdot_mps, density, model.atmosphere)
+def relieved(law, cos_bank, pulled, ng, altitude_m, hdot_mps, model, density=None):
+    """``cos_bank``, or 1 (full lift up) where the law's load relief flies it (``density``
+    at ``altitude_m``: evaluated there when ``None``)."""
+    relief = load_relief(law, pulled, ng, altitude_m, hdot_mps, model.atmosphere, density)
     return cos_bank if relief is None else jnp.where(relief, 1.0, cos_bank)
 
 

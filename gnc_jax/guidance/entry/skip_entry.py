@@ -199,9 +199,7 @@ class SkipEntryGuidance(SkipEntryParameters):
                 jnp.where(phase == 2, state.bank_mag, track_mag),
             ),
         )
-        atmosphere = ctx.model.atmosphere
-        density = atmosphere.density(fv.altitude_m)
-        relief = load_relief(self, pulled, ng, fv.altitude_m, fv.hdot_mps, density, atmosphere)
+        relief = load_relief(self, pulled, ng, fv.altitude_m, fv.hdot_mps, ctx.model.atmosphere)
         if relief is not None:  # full lift up: the magnitude 0, whatever the sign
             mag = jnp.where(live & (phase != 0) & relief, 0.0, mag)
         chi_now = earth.equatorial_radius_m * crossrange_to_target(y.r, v_rel, target)

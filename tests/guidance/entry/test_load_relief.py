@@ -35,7 +35,7 @@ def test_the_relief_rule_against_the_exponential_closed_form():
     pulled = rng.uniform(size=400) < 0.7
     law = _law(lead_s=12.0, limit_g=9.0)
     density = atmosphere.density(altitude)
-    got = np.asarray(load_relief(law, pulled, ng, altitude, hdot, density, atmosphere))
+    got = np.asarray(load_relief(law, pulled, ng, altitude, hdot, atmosphere, density))
     ahead = ng * np.exp(-np.minimum(hdot, 0.0) * 12.0 / h_scale)
     margin = np.abs(ahead - 0.95 * 9.0) > 1e-9  # away from the boundary's last bits
     want = pulled & (ahead > 0.95 * 9.0)
@@ -43,12 +43,12 @@ def test_the_relief_rule_against_the_exponential_closed_form():
     assert want.sum() > 50 and (~want & pulled).sum() > 50
     # a climb: the load now alone; the lead 0: the load now
     rho = atmosphere.density(40e3)
-    climb = np.asarray(load_relief(_law(), True, 9.6, 40e3, 50.0, rho, atmosphere))
-    lead0 = np.asarray(load_relief(_law(lead_s=0.0), True, 9.4, 40e3, -400.0, rho, atmosphere))
+    climb = np.asarray(load_relief(_law(), True, 9.6, 40e3, 50.0, atmosphere))
+    lead0 = np.asarray(load_relief(_law(lead_s=0.0), True, 9.4, 40e3, -400.0, atmosphere, rho))
     assert climb and not lead0
     # off, or a skip: no relief, compiled out
     for law in (_law("off"), _law(direct=False)):
-        assert load_relief(law, pulled, ng, altitude, hdot, density, atmosphere) is None
+        assert load_relief(law, pulled, ng, altitude, hdot, atmosphere, density) is None
 
 
 def test_the_relief_keeps_far_direct_entries_within_the_load_limit():
