@@ -51,7 +51,7 @@ class Prediction(NamedTuple):
     miss_m: Scalar  # predicted range error (> 0 overshoot)
     crossrange_m: Scalar  # crossrange to the target at the end point (> 0 target on the left)
     kind: Array  # 0 switch point reached, 1 chute reached without skip, 2 skip-out/time-out,
-    # 4 a dive (the load beyond predictor_dive_load_g: ends short, at the last step's start)
+    # 4 a dive (the load beyond dive_load_g: ends short, at the last step's start)
     steps: Array  # integration steps used
 
 
@@ -391,10 +391,21 @@ def _phases(law, c: _PredictorState, alt1, hdot1, ng1, speed1):
         kepler = switch = second = jnp.zeros_like(kepler)
     chute = alt1 < law.chute_altitude_m
     skip = alt1 > law.skip_out_altitude_m
-    dive = ~(ng1 <= law.predictor_dive_load_g)  # (a NaN state too)
+    dive = ~(ng1 <= dive_load_g(law))  # (a NaN state too)
     kind = jnp.where(switch, 0, jnp.where(chute, 1, jnp.where(skip, 2, -1)))
     kind = jnp.where(dive, 4, kind).astype(jnp.int32)
     return dip, pulled, kepler, second, first, kind
+
+
+def dive_load_g(law):
+    """The load (g) beyond which a prediction is a dive and ends short: the numerical guard
+    ``predictor_dive_load_g``, or in a skip ``predictor_load_fraction`` of the capsule's load
+    limit where that is lower (none for a mission without one). A direct entry keeps the
+    guard alone: its reach is designed within 90 % of the limit already, and the targets at
+    its short end ask for loads near it (see ``predictor_load_fraction``)."""
+    if is_direct(law):
+        return law.predictor_dive_load_g
+    return jnp.minimum(law.predictor_dive_load_g, law.predictor_load_fraction * law.load_limit_g)
 
 
 def _next_bank(law, c: _PredictorState, dt, sigma_0, v_0, model, *end):

@@ -63,7 +63,8 @@ class SkipEntryParameters(AbstractEntryGuidance):
             entry commands: a lift vector held straight up or down has no lateral component.
         chute_altitude_m: end of guidance.
         load_limit_g: the capsule's load limit (``simulation.load_limit_g``), g: the load
-            relief keeps the sensed load within ``load_relief_fraction`` of it.
+            relief keeps the sensed load within ``load_relief_fraction`` of it, and a
+            prediction loaded beyond ``predictor_load_fraction`` of it is a dive.
         direct: whether the law flies its direct-entry mode (static), resolved by the capsule
             system from ``entry_mode`` and handed over in the mission.
     """
@@ -289,6 +290,22 @@ class SkipEntryParameters(AbstractEntryGuidance):
         "steps RK4 then diverges (the speed to 1e7 m/s, 'above the skip-out altitude'), so "
         "full lift down read as a skip-out, the corrector flew it, and the capsule dove in "
         "at 52 g",
+    )
+    predictor_load_fraction: Scalar = param(
+        0.9,
+        lo=0.0,
+        lo_open=True,
+        hi=100.0,
+        doc="in a skip, a prediction whose load exceeds this fraction of the capsule's load "
+        "limit (simulation.load_limit_g) is a dive too, as beyond predictor_dive_load_g, so "
+        "the corrector plans no profile that loads the capsule beyond it: a margin for the "
+        "dispersions between a prediction and the flight. Flying its predictions up to the "
+        "20 g guard, a steep skip's corrector banked into loads it could not fly: at -7.1 deg "
+        "all 200 runs to 2500 km and 93 to 4000 km read overload, 13 and 10 with it. A direct "
+        "entry keeps the guard alone: at the short end of its reach (designed within 90 % of "
+        "the limit) the margin turned overloads into more misses (second vehicle, -5.7 deg / "
+        "2500 km: 15 overload -> 47 missed). A fraction of 2 or more leaves the guard alone "
+        "for the packaged 10 g capsule",
     )
     predictor_max_steps: int = param(1000, lo=10, hi=100000, doc="predictor step budget")
     predictor_bank: str = param(

@@ -1,6 +1,8 @@
-"""The capsule law's load relief in its direct mode: its rule against the exponential
-atmosphere's closed form, and the far end of the direct reach, where dispersed runs dive in a
-second dip beyond the capsule's load limit without it."""
+"""The capsule law and the capsule's load limit: the direct mode's load relief (its rule against
+the exponential atmosphere's closed form, and the far end of the direct reach, where dispersed
+runs dive in a second dip beyond the limit without it), and the predictions' load margin (a
+prediction loaded beyond a fraction of the limit is a dive), which keeps the corrector's
+plans within it."""
 
 import types
 
@@ -10,6 +12,7 @@ import gnc_jax as gj
 from gnc_jax._status import Status
 from gnc_jax.dynamics.atmosphere import Atmosphere
 from gnc_jax.guidance.entry.phases import load_relief
+from gnc_jax.guidance.entry.predictor import dive_load_g
 
 
 def _law(relief="direct", fraction=0.95, lead_s=10.0, limit_g=10.0, direct=True):
@@ -67,3 +70,37 @@ def test_the_relief_keeps_far_direct_entries_within_the_load_limit():
     assert on.outcomes["load_peak_g"].max() < limit < off.outcomes["load_peak_g"].max()
     # the runs flew the direct mode: no switch point
     assert (on.outcomes["switch_speed_mps"] == 0.0).all()
+
+
+def test_the_dive_load_is_the_guard_or_the_fraction_of_the_limit_below_it():
+    def law(limit_g, fraction=0.9, direct=False):
+        return types.SimpleNamespace(
+            predictor_dive_load_g=20.0,
+            predictor_load_fraction=fraction,
+            load_limit_g=limit_g,
+            direct=direct,
+        )
+
+    assert float(dive_load_g(law(10.0))) == 0.9 * 10.0
+    assert float(dive_load_g(law(np.inf))) == 20.0  # a mission without a limit: the guard
+    assert float(dive_load_g(law(10.0, fraction=2.5))) == 20.0
+    assert float(dive_load_g(law(40.0))) == 20.0
+    assert float(dive_load_g(law(10.0, direct=True))) == 20.0  # a direct entry: the guard
+
+
+def test_the_predictions_keep_a_margin_to_a_lower_load_limit():
+    """The packaged skip (-5.9 deg / 8000 km) of a capsule limited to 5.3 g, within the
+    nominal's 5.6 g largest peak: with its predictions allowed up to twice the limit
+    (``predictor_load_fraction`` 2) the corrector plans loads beyond it and some of 32
+    dispersed runs read ``overload``; with predictions ending as dives beyond 90 % of it every
+    run lands ``ok`` below 95 % of the limit."""
+    sc = gj.load_scenario("lunar-skip-entry", overrides=["simulation.load_limit_g=5.3"])
+    loose = gj.run_study(
+        sc.with_overrides(["guidance.skip_entry.predictor_load_fraction=2"]),
+        runs=32,
+        progress=False,
+    )
+    assert (loose.status == Status.overload).sum() >= 1
+    margin = gj.run_study(sc, runs=32, progress=False)
+    assert (margin.status == Status.ok).all()
+    assert margin.outcomes["load_peak_g"].max() < 0.95 * 5.3 < loose.outcomes["load_peak_g"].max()

@@ -613,11 +613,19 @@ def test_a_predicted_dive_ends_short_instead_of_diverging(law_and_ctx):
         pull = jnp.asarray(False)
         return predict(g, y, 0.0, pull, jnp.radians(180.0), model, ctx.target_fixed)
 
-    dive_load = jnp.asarray(1000.0, law.predictor_dive_load_g.dtype)  # one lift_down program
-    unguarded = eqx.tree_at(lambda g: g.predictor_dive_load_g, law, dive_load)
-    guarded, diverged = lift_down(law), lift_down(unguarded)
+    def with_loads(dive_g, fraction):  # leaves of the same dtype: one lift_down program
+        g = eqx.tree_at(lambda g: g.predictor_dive_load_g, law, jnp.asarray(float(dive_g)))
+        return eqx.tree_at(lambda g: g.predictor_load_fraction, g, jnp.asarray(float(fraction)))
+
+    # the numerical guard alone (20 g), the capsule's 10 g limit left out of the predictions
+    guarded_law = with_loads(law.predictor_dive_load_g, 100.0)
+    unguarded = with_loads(1000.0, 100.0)
+    guarded, diverged = lift_down(guarded_law), lift_down(unguarded)
     fine = lift_down(dataclasses.replace(unguarded, predictor_dt_s=1.0, predictor_coast_dt_s=1.0))
     assert int(fine.kind) == 1 and float(fine.miss_m) < -1000e3  # lands far short
     assert int(guarded.kind) == 4
     np.testing.assert_allclose(float(guarded.miss_m), float(fine.miss_m), rtol=0.1)
     assert int(diverged.kind) != 1  # the 16 s steps without the guard: not a landing
+    # the packaged law: a dive at 90 % of the capsule's limit already, earlier, shorter
+    limited = lift_down(law)
+    assert int(limited.kind) == 4 and float(limited.miss_m) < float(guarded.miss_m)
