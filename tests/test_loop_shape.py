@@ -40,11 +40,11 @@ def example(name):
 # in both layouts.
 @pytest.mark.parametrize("name", ["impactor", "intercept", "capsule"])
 def test_accelerator_layout_on_cpu_matches_within_batch_tolerance(name):
-    """Three runs in chunks of two on one device: in the CPU's layout that is the program
+    """Five runs in chunks of four on all devices: in the CPU's layout that is the program
     tests/test_family.py compiles for its chunked study, read from the session's XLA cache."""
     assert name in gj.systems()
     scenario = example(name)
-    study = dict(runs=3, seed=3, chunk_size=2, n_devices=1, progress=False)
+    study = dict(runs=5, seed=3, chunk_size=4, progress=False)
     cpu = gj.run_study(scenario, **study)
     with using_loop_shape(closed_loop_layout(gj.get_system(name))):  # what a GPU compiles
         acc = gj.run_study(scenario, **study)

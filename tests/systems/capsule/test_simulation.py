@@ -89,8 +89,8 @@ def test_flight_stopped_when_down_equals_the_full_length_scan(capsule_scenario):
 def test_downrange_gradient_wrt_tracking_gains_matches_finite_differences(
     capsule_scenario, paper_scale
 ):
-    """Forward-mode derivative of the chute downrange error with respect to the four
-    second-entry feedback gains vs central differences at two steps.
+    """The derivative of the chute downrange error with respect to the four second-entry
+    feedback gains vs central differences at two steps.
 
     The derivative is pathwise: the bank reversals and the phase switches are hard logic, so
     a run where a reversal moves by a control step inside the difference interval has a
@@ -98,13 +98,15 @@ def test_downrange_gradient_wrt_tracking_gains_matches_finite_differences(
     difference quotients disagreeing and skipped; the derivative must match on the others,
     and most runs must qualify.
 
-    Reverse mode gives the forward-mode derivative run by run: the tuner's (the flight's
-    cycles in equinox's checkpointed ``while_loop``, the corrector's solutions passing no
-    derivative, since the tracking gains act after the last of them) and, with --paper-scale,
-    the one for a derivative of anything, which differentiates every solution: what it
+    The derivatives are reverse mode's, the tuner's (the flight's cycles in equinox's
+    checkpointed ``while_loop``, the corrector's solutions passing no derivative, since the
+    tracking gains act after the last of them). With --paper-scale, forward mode's are checked
+    against the differences too, and reverse mode's against forward mode's run by run, also for
+    the reverse pass that differentiates every solution (a derivative of anything): what it
     passes back through them reaches no gain and must not spoil the rest (a NaN there would).
     The solutions' derivative itself is checked against differences of converged solves in
-    tests/guidance/entry/test_skip_entry.py.
+    tests/guidance/entry/test_skip_entry.py; forward mode through the relaxed law, the tuner's
+    with few gains, in tests/test_family.py.
 
     CI runs two of the gains (range and Ḣ feedback) on two runs; --paper-scale all four on
     three."""
@@ -128,28 +130,33 @@ def test_downrange_gradient_wrt_tracking_gains_matches_finite_differences(
     runs = jnp.arange(n_runs)
     steps = np.array([1e-6, 1e-7])
     offsets = np.concatenate([np.eye(n_gains) * h * s for h in steps for s in (1.0, -1.0)])
-    # One program, (gains, direction) pairs x runs: the derivative along each unit direction at
-    # the defaults, and the values at the offset gains (their tangents unused).
-    gains = jnp.concatenate([jnp.tile(g0, (n_gains, 1)), g0 + jnp.asarray(offsets)])
-    directions = jnp.concatenate([jnp.eye(n_gains), jnp.zeros_like(offsets)])
-    pushed = jax.vmap(lambda g, d, i: jax.jvp(lambda g: downrange(g, i), (g,), (d,)))
-    f = jax.jit(jax.vmap(lambda i: pushed(gains, directions, jnp.full(len(gains), i))))
-    vals, tangents = (np.asarray(a) for a in f(runs))  # (run, pair)
-    jac = tangents[:, :n_gains]  # (run, gain)
-    vals = vals[:, n_gains:].reshape(n_runs, 2, 2, n_gains)
+    shifted = g0 + jnp.asarray(offsets)
+    # the values at the offset gains, (run, offset), in one program
+    at = jax.vmap(lambda i: jax.vmap(lambda g: downrange(g, i))(shifted))
+    vals = np.asarray(jax.jit(at)(runs)).reshape(n_runs, 2, 2, n_gains)
     fd = (vals[:, :, 0] - vals[:, :, 1]) / (2 * steps[None, :, None])  # (run, step, gain)
     scale = np.abs(fd[:, 1]).max(axis=1, keepdims=True) + 0.1
     smooth = (np.abs(fd[:, 0] - fd[:, 1]) / scale).max(axis=1) < 1e-3
-    assert smooth.sum() >= n_runs - 1, (fd, jac)
+    assert smooth.sum() >= n_runs - 1, fd
+
+    def reverse(corrector_derivative):
+        flown = reverse_mode(sim, corrector_derivative)
+        backward = jax.vmap(lambda i, flown=flown: jax.grad(downrange)(g0, i, flown))
+        return np.asarray(jax.jit(backward)(runs))  # (run, gain)
+
+    jac = reverse(False)
     np.testing.assert_allclose(jac[smooth], fd[smooth, 1], rtol=1e-4, atol=1e-4 * scale.max())
     moved = np.abs(jac[smooth]).max(axis=1)  # the gains do move the chute point (km per unit)
     assert np.all(moved > 0.1) if paper_scale else moved.max() > 0.1
-    # the tuner's reverse pass (these gains act after the corrector's last solution: none is
-    # differentiated); with --paper-scale also the one that differentiates every solution
-    for corrector_derivative in (False, True) if paper_scale else (False,):
-        flown = reverse_mode(sim, corrector_derivative)
-        backward = jax.vmap(lambda i, flown=flown: jax.grad(downrange)(g0, i, flown))
-        np.testing.assert_allclose(np.asarray(jax.jit(backward)(runs)), jac, rtol=1e-6)
+    if paper_scale:  # forward mode, one direction per gain; reverse mode's equal to it
+        pushed = jax.vmap(lambda d, i: jax.jvp(lambda g: downrange(g, i), (g0,), (d,))[1])
+        forward = jax.vmap(lambda i: pushed(jnp.eye(n_gains), jnp.full(n_gains, i)))
+        tangents = np.asarray(jax.jit(forward)(runs))  # (run, gain)
+        np.testing.assert_allclose(
+            tangents[smooth], fd[smooth, 1], rtol=1e-4, atol=1e-4 * scale.max()
+        )
+        np.testing.assert_allclose(jac, tangents, rtol=1e-6)
+        np.testing.assert_allclose(reverse(True), tangents, rtol=1e-6)
 
 
 def test_reverse_mode_leaves_out_the_corrector_only_for_gains_acting_after_it():
