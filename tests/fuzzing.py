@@ -30,11 +30,10 @@ from hypothesis import strategies as st
 import gnc_jax as gj
 from gnc_jax.schema import Field
 
-RUNS = 2
+RUNS = 4
 """Runs per fuzz study: enough to exercise the batch and the statistics, cheap to run. They run
-on one device, in one batch: the example's program is then the one tests/test_family.py
-compiles for its chunked study (chunks of two on one device), read from the session's XLA
-cache."""
+in one chunk of four on every device: the example's program is then the one
+tests/test_family.py compiles for its chunked study, read from the session's XLA cache."""
 MAX_HOURS = 60.0 / 3600.0
 """A fuzz study estimated (by the system's cost model) to take longer than a minute is refused
 before compilation: that is how a runaway case is told apart from a hang."""
@@ -406,7 +405,7 @@ def run_case(case: Case, runs: int = RUNS, max_hours: float = MAX_HOURS) -> Resu
         scenario = gj.load_scenario(system.example, overrides=case.scenario_overrides())
         stage = "run"
         study = gj.run_study(
-            scenario, runs=runs, seed=0, n_devices=1, progress=False, max_hours=max_hours
+            scenario, runs=runs, seed=0, chunk_size=RUNS, progress=False, max_hours=max_hours
         )
         stage = "summary"
         result = check_study(study)

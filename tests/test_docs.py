@@ -2,7 +2,7 @@
 Python block of every page runs.
 
 A page's ```python blocks run in order in one namespace, each page in a fresh interpreter in a
-temporary directory, with run counts reduced (``runs=N`` becomes ``runs=min(N, 20)``) so the
+temporary directory, with run counts reduced (``runs=N`` becomes ``runs=min(N, 300)``) so the
 suite stays small; a block that only shows a file (a ``--8<--`` include) is not run. A page
 opts a block out with an HTML comment ``<!-- no-run -->`` on the line before it.
 """
@@ -18,7 +18,10 @@ import pytest
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 BLOCK = re.compile(r"(<!-- no-run -->\s*\n)?```python\n(.*?)```", re.S)
-MAX_RUNS = 20  # a deep-impact-los study of 20 runs is the one tests/test_peer_numba.py compiles
+# A deep-impact-los study of 300 runs is the one tests/test_peer_numba.py and the impactor's
+# paper-scale test compile (read from the session's XLA cache); 300 runs take a fraction of a
+# second next to a compilation.
+MAX_RUNS = 300
 
 
 def python_blocks(page: pathlib.Path) -> list[str]:

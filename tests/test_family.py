@@ -79,14 +79,15 @@ def test_batch_equals_per_run_loop_chunking_and_devices(name, law):
     One study, all differences at once (one compilation per system): five runs in chunks of
     four on all devices (two host devices on a 2-core CPU, one GPU), so several runs share a
     device's batch, the runs are split over the devices and the last chunk is ragged (padded);
-    each run against the same run simulated alone, unbatched, on one device."""
+    each run against the same run simulated alone, unbatched, on one device (with its trace:
+    the program the reports and the trace tests fly, compiled once)."""
     scenario = example(name, law)
     study = gj.run_study(scenario, runs=5, seed=7, chunk_size=4, progress=False)
     assert study.n_devices == len(jax.devices()) and study.chunk_size == 4
     assert study.summary()["failed"] == 0, study.summary()["failed_by_status"]
     tolerance = gj.get_system(name).batch_tolerance
     for i in range(5):
-        one, _ = gj.simulate_one(scenario, index=i, seed=7, record=False)
+        one, _ = gj.simulate_one(scenario, index=i, seed=7, record=True)
         assert_outcomes_equal(study.outcomes, one._asdict(), rows=i, tolerance=tolerance)
 
 

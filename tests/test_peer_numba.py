@@ -38,24 +38,33 @@ OFF_NOMINAL = [
     "dynamics.sun_distance_au=1.2",
     "dynamics.sun_direction=[0.3, 0.8, -0.5]",
 ]
-RUNS = 20
+# Runs compared run for run: for the packaged scenario 300 in the default chunks, the program
+# that tests/systems/impactor/test_simulation.py::test_paper_scale_deep_impact compiles.
+RUNS = {"nominal": 300, "off-nominal": 20}
 COMPARED = ("dv_mps", "burn_time_s", "fuel_kg", "nav_sigma_b_m", "los_error_rms_urad")
 
 
 @pytest.fixture(scope="module", params=["nominal", "off-nominal"])
-def scenario(request):
+def case(request):
+    """``(scenario, runs)``: the scenario and its runs compared run for run (RUNS)."""
     overrides = OFF_NOMINAL if request.param == "off-nominal" else None
-    return gj.load_scenario("deep-impact-los", overrides=overrides)
+    return gj.load_scenario("deep-impact-los", overrides=overrides), RUNS[request.param]
 
 
 @pytest.fixture(scope="module")
-def fed(scenario):
-    """gnc_jax's outcomes of RUNS runs, their normals, and the peer's outcomes fed them."""
-    ref = gj.run_study(scenario, runs=RUNS, seed=3, progress=False).outcomes
+def scenario(case):
+    return case[0]
+
+
+@pytest.fixture(scope="module")
+def fed(case):
+    """gnc_jax's outcomes of the case's runs, their normals, and the peer's outcomes fed them."""
+    scenario, runs = case
+    ref = gj.run_study(scenario, runs=runs, seed=3, chunk_size=runs, progress=False).outcomes
     sim, _ = gj.build(scenario)
     # Writable copies (numba types a read-only array, as numpy views of JAX arrays are, apart):
     # the rolled draws below are writable too, so one compilation of the kernel serves both.
-    draws = tuple(np.array(a) for a in peer.gnc_jax_draws(sim, RUNS, seed=3))
+    draws = tuple(np.array(a) for a in peer.gnc_jax_draws(sim, runs, seed=3))
     return ref, draws, peer.run_fed(scenario, *draws)
 
 
@@ -105,11 +114,11 @@ def test_own_draws_are_reproducible_per_run():
     assert len(np.unique(a["miss_m"])) == 6
 
 
-def _p_values(scenario, runs) -> dict:
+def _p_values(scenario, runs, chunk) -> dict:
     """p-values of the hypothesis that the peer's own draws and gnc_jax's give the same
     distributions of the outcomes (two-sample KS; chi-square on the firing counts)."""
-    # In chunks of RUNS: the executable compiled for the run-for-run test serves again.
-    ref = gj.run_study(scenario, runs=runs, seed=0, chunk_size=RUNS, progress=False).outcomes
+    # In the run-for-run test's chunks (RUNS): the executable compiled for it serves again.
+    ref = gj.run_study(scenario, runs=runs, seed=0, chunk_size=chunk, progress=False).outcomes
     got = peer.run_own(scenario, runs, seed=987_654)
     assert np.all(got["status"] == gj.Status.ok) and np.all(ref["status"] == gj.Status.ok)
     p_values = {
@@ -130,7 +139,9 @@ ALPHA = 0.01 / 6
 
 def test_own_draws_match_gnc_jax_statistically():
     """CI size: 300 runs of the off-nominal approach (2000 s, about 1 s of gnc_jax)."""
-    p = _p_values(gj.load_scenario("deep-impact-los", overrides=OFF_NOMINAL), 300)
+    p = _p_values(
+        gj.load_scenario("deep-impact-los", overrides=OFF_NOMINAL), 300, RUNS["off-nominal"]
+    )
     assert len(p) == 6 and all(v > ALPHA for v in p.values()), p
 
 
@@ -142,5 +153,6 @@ def test_own_draws_match_gnc_jax_statistically_deep_impact(paper_scale):
     draws from a per-run table): gnc_jax's runs 0-499 have a mean miss_r of +0.4 m against
     -2.9 m over runs 0-3999, while 1000, 2000 and 4000 runs agree with the peer (p >= 0.016 on
     every outcome) and with the previous layout (p = 0.56 on miss_r, 2000 runs each)."""
-    p = _p_values(gj.load_scenario("deep-impact-los"), 2000 if paper_scale else 1000)
+    runs = 2000 if paper_scale else 1000
+    p = _p_values(gj.load_scenario("deep-impact-los"), runs, RUNS["nominal"])
     assert len(p) == 6 and all(v > ALPHA for v in p.values()), p

@@ -310,8 +310,9 @@ def relative_state(model: HeliocentricModel, t_s, y: Float[Array, "6"]):
     return y[:3] - r_p, y[3:6] - v_p
 
 
-def _encounter_event(model: HeliocentricModel, state_of):
-    """Closest approach (r_rel·v_rel crosses zero upwards inside the event sphere) or impact.
+def _encounter_event(state_of):
+    """Closest approach (r_rel·v_rel crosses zero upwards inside the event sphere) or impact,
+    of the state ``state_of(y)``; the model is the solve's ``args``.
 
     No root finder: the solve stops at the end of the step in which a condition changes sign,
     and `_to_periapsis` then finds the periapsis epoch from Kepler's equation. (Locating the
@@ -320,17 +321,32 @@ def _encounter_event(model: HeliocentricModel, state_of):
     differences; the step-end state is differentiated exactly.)
     """
 
-    def closest_approach(t, y, args, **kwargs):
+    def closest_approach(t, y, model, **kwargs):
         r_rel, v_rel = relative_state(model, t, state_of(y))
         near = r_rel @ r_rel < model.event_radius_m**2
         # Outside the sphere the value is kept negative, so only a periapsis inside it counts.
         return jnp.where(near, r_rel @ v_rel, -1.0)
 
-    def impact(t, y, args, **kwargs):
+    def impact(t, y, model, **kwargs):
         r_rel, _ = relative_state(model, t, state_of(y))
         return jnp.linalg.norm(r_rel) - model.target_radius_m
 
     return diffrax.Event((closest_approach, impact), direction=(True, False))
+
+
+def _state(y):
+    return y
+
+
+def _state_of_variational(y):
+    return y[0]
+
+
+# One event object per state layout, built once: every solve to an encounter with the same
+# layout is then the same function to JAX, traced once per program (a closure built per call
+# made each solve a new trace).
+_ENCOUNTER = _encounter_event(_state)
+_ENCOUNTER_VARIATIONAL = _encounter_event(_state_of_variational)
 
 
 def _to_periapsis(model: HeliocentricModel, field, sol, state_of):
@@ -365,10 +381,9 @@ def propagate_to_encounter(
     The closest approach is detected by an event on r_rel·v_rel and its epoch found from
     Kepler's equation (`_to_periapsis`); ``Encounter.t_s`` is that epoch.
     """
-    event = _encounter_event(model, lambda y: y)
     t0 = jnp.asarray(t0_s, float)
-    sol = _solve(model, vector_field, t0, jnp.asarray(t_max_s, float), y0, event)
-    t, y, r_rel, v_rel, status = _to_periapsis(model, vector_field, sol, lambda y: y)
+    sol = _solve(model, vector_field, t0, jnp.asarray(t_max_s, float), y0, _ENCOUNTER)
+    t, y, r_rel, v_rel, status = _to_periapsis(model, vector_field, sol, _state)
     return Encounter(t, y, r_rel, v_rel, status)
 
 
@@ -383,12 +398,14 @@ def propagate_to_encounter_with_stm(
     left out, as in the paper, which is harmless for flow-invariant targets such as the
     hyperbolic B-plane and the arrival epoch (`geometry.hyperbola`).
     """
-    event = _encounter_event(model, lambda y: y[0])
     phi0 = jnp.concatenate([jnp.zeros((3, 3)), jnp.eye(3)])
     t0 = jnp.asarray(t0_s, float)
-    sol = _solve(model, _variational_field, t0, jnp.asarray(t_max_s, float), (y0, phi0), event)
+    y0 = (y0, phi0)
+    sol = _solve(
+        model, _variational_field, t0, jnp.asarray(t_max_s, float), y0, _ENCOUNTER_VARIATIONAL
+    )
     t, (x, phi), r_rel, v_rel, status = _to_periapsis(
-        model, _variational_field, sol, lambda y: y[0]
+        model, _variational_field, sol, _state_of_variational
     )
     return Encounter(t, x, r_rel, v_rel, status), phi
 
@@ -399,7 +416,6 @@ def steps_to_encounter(
     """``(steps, exhausted)`` of `propagate_to_encounter`'s solve from ``y0``: the integrator
     steps it takes to the closest approach (accepted and rejected, what ``max_steps`` bounds)
     and whether it stopped at ``model.max_steps`` before the encounter or ``t_max_s``."""
-    event = _encounter_event(model, lambda y: y)
     t0 = jnp.asarray(t0_s, float)
-    sol = _solve(model, vector_field, t0, jnp.asarray(t_max_s, float), y0, event)
+    sol = _solve(model, vector_field, t0, jnp.asarray(t_max_s, float), y0, _ENCOUNTER)
     return sol.stats["num_steps"], sol.result == diffrax.RESULTS.max_steps_reached

@@ -212,7 +212,10 @@ def test_paper_scale_skip_entry(capsule_scenario, paper_scale):
     1000 runs with --paper-scale; 100 in CI (a 3σ interval of 100 runs is looser but the
     limits are 2.5× the 1000-run result)."""
     runs = 1000 if paper_scale else 100
-    s = gj.run_study(capsule_scenario, runs=runs, seed=0, progress=False).summary()
+    # CI: in chunks of four on every device, the program tests/test_family.py compiles
+    chunk = None if paper_scale else 4
+    s = gj.run_study(capsule_scenario, runs=runs, seed=0, chunk_size=chunk, progress=False)
+    s = s.summary()
     assert s["failed"] == 0 and s["runs"] == runs
     for name in ("downrange_err_km", "crossrange_err_km"):
         lo, hi = s[name]["three_sigma"]

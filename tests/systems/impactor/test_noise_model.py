@@ -23,7 +23,8 @@ MODEL = {f"navigation.model_{k}": v for k, v in PACKAGED.items()}
 
 def _study(overrides):
     sc = gj.load_scenario("deep-impact-los", {**ImpactorSystem.test_overrides, **overrides})
-    return gj.run_study(sc, runs=16, seed=5, progress=False, n_devices=1)
+    # in chunks of four on every device: the program tests/test_family.py compiles
+    return gj.run_study(sc, runs=16, seed=5, chunk_size=4, progress=False)
 
 
 def test_unset_the_model_is_the_truth_and_set_it_replaces_it():
