@@ -31,8 +31,9 @@ METHODS = {
     "central_difference": "phoenix-midcourse-cd",
     "stm": "phoenix-midcourse-stm",
 }
-CI_RUNS = 4  # every test below that runs the default scenario uses this count (and the family
-# tests theirs, 4 on two devices): one compilation, shared through the session's XLA cache
+CI_RUNS = 4  # every test below that runs the default scenario uses this count, in one chunk
+# on every device as the family tests' chunks of four: one compilation, shared through the
+# session's XLA cache
 
 
 @pytest.mark.slow
