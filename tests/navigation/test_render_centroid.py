@@ -20,6 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from scipy import integrate, ndimage
+from short_impactor import SHORT
 
 import gnc_jax as gj
 from gnc_jax.navigation.centroid import extract_centroid, label_components
@@ -221,17 +222,8 @@ def test_two_targets_the_brightest_wins():
     assert np.abs(np.asarray(c.pixel_xy) - 16.0).max() < 0.5  # the big one, at the centre
 
 
-SHORT_IMAGE = [
-    "approach.position_km=[10200.0, 0.0, 0.0]",
-    "errors.delivery_position_km=1.0",
-    "navigation.knowledge_position_km=[20.0, 1.0, 1.0]",
-    "guidance.retarget_tgo_s=300.0",
-    "guidance.predictive.burn_times_s=[150.0, 600.0, 700.0, 900.0]",
-]
-
-
 def test_image_navigation_vmap_equals_per_run_loop():
-    sc = gj.load_scenario("autonav-predictive", overrides=SHORT_IMAGE)
+    sc = gj.load_scenario("autonav-predictive", overrides=SHORT)
     study = gj.run_study(sc, runs=4, seed=5, progress=False)
     s = study.summary()
     assert s["failed"] == 0
@@ -248,7 +240,7 @@ def test_image_navigation_vmap_equals_per_run_loop():
 
 def test_phase_correction_removes_the_brightness_offset():
     """Without the correction the 60 deg phase offset (0.4 R / range) biases every LOS."""
-    sc = gj.load_scenario("autonav-predictive", overrides=SHORT_IMAGE)
+    sc = gj.load_scenario("autonav-predictive", overrides=SHORT)
     on = gj.run_study(sc, runs=4, seed=1, progress=False).outcomes
     off = gj.run_study(
         sc.with_overrides({"navigation.phase_correction": False}), runs=4, seed=1, progress=False
