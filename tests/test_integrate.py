@@ -1,11 +1,16 @@
-"""Fixed-step RK4 of the impactor dynamics against scipy's DOP853."""
+"""Fixed-step RK4 of the impactor dynamics against scipy's DOP853; the adaptive solves'
+cheaper-compiled diffrax loop against diffrax's own."""
 
+import diffrax
+import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from packaging.version import Version
 from scipy.integrate import solve_ivp
 
+from gnc_jax import integrate
 from gnc_jax.dynamics.impactor import (
     Engine,
     ImpactorState,
@@ -95,3 +100,70 @@ def test_terms_left_out_when_zero_give_the_same_bits(mu, tide):
         np.testing.assert_array_equal(
             np.asarray(every.gravity(y0.r)), np.asarray(needed.gravity(y0.r))
         )
+
+
+def _adaptive_solve(adjoint, event=False):
+    """A batched adaptive Dopri8 solve of a forced oscillator to a traced end time (either
+    direction), with a stopping event; the values and their forward-mode derivatives."""
+
+    def field(t, y, args):
+        return jnp.stack([y[1], -args * y[0] + 0.3 * jnp.sin(t)])
+
+    stop = diffrax.Event(lambda t, y, args, **kw: y[0] - 1.2) if event else None
+
+    def solve(t1, y0, w):
+        sol = diffrax.diffeqsolve(
+            diffrax.ODETerm(field),
+            diffrax.Dopri8(),
+            t0=0.0,
+            t1=t1,
+            dt0=None,
+            y0=y0,
+            args=w,
+            stepsize_controller=diffrax.PIDController(rtol=1e-10, atol=1e-12),
+            event=stop,
+            adjoint=adjoint,
+            saveat=diffrax.SaveAt(t1=True),
+            throw=False,
+        )
+        return sol.ts[-1], sol.ys[-1], sol.stats["num_steps"]
+
+    def with_tangent(t1, y0, w):
+        out, tangent = jax.jvp(lambda w: solve(t1, y0, w)[1], (w,), (jnp.ones_like(w),))
+        return solve(t1, y0, w), tangent
+
+    return jax.jit(jax.vmap(with_tangent))
+
+
+def test_the_adaptive_loop_is_diffraxs_bit_for_bit_with_one_clip_floor_compiled():
+    """gnc_jax's ``ForwardMode`` flies diffrax's own loop with its t1 - 100 ulp threshold
+    computed in a ``fori_loop``: the same end times, states, step counts and derivatives bit
+    for bit, forward and backward in time, with and without an event; the compiled solve has
+    ``nextafter`` once where diffrax's has a hundred per solve (the solve otherwise unchanged).
+    The versions read for it must take it (a later diffrax with another loop falls back to its
+    own, which the equality then checks trivially)."""
+    active = integrate._LOOP is not diffrax._integrate.loop
+    if Version(diffrax.__version__) <= Version("0.7.2"):
+        assert active, "diffrax's loop source no longer matches: the clip floor is compiled whole"
+    # the threshold itself, at the edges too (zero, subnormals, infinities, NaN)
+    edges = jnp.array([0.0, -0.0, 5e-324, -1e-310, 2.2250738585072014e-308, 1.0, -1.0, 2.4e8])
+    edges = jnp.concatenate([edges, jnp.array([1.7976931348623157e308, jnp.inf, -jnp.inf])])
+    chained = edges
+    for _ in range(100):
+        chained = eqxi.prevbefore(chained)
+    looped = jax.jit(integrate._prevbefore_times(100))(edges)
+    np.testing.assert_array_equal(
+        np.asarray(looped).view(np.int64), np.asarray(chained).view(np.int64)
+    )
+    t1 = jnp.array([4.0, 7.5, -3.0, 1e-3, 9.0])
+    y0 = jnp.array([[1.0, 0.0], [0.5, 0.2], [1.0, -0.1], [0.0, 1.0], [1.0, 0.5]])
+    w = jnp.array([1.0, 2.0, 0.5, 1.5, 3.0])
+    for event in (False, True):
+        ours = _adaptive_solve(integrate.ForwardMode(), event)
+        theirs = _adaptive_solve(diffrax.ForwardMode(), event)
+        got, want = ours(t1, y0, w), theirs(t1, y0, w)
+        for a, b in zip(jax.tree_util.tree_leaves(got), jax.tree_util.tree_leaves(want)):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+        count = lambda f: f.lower(t1, y0, w).as_text().count("next_after")  # noqa: E731
+        n_ours, n_theirs = count(ours), count(theirs)  # a chain per solve traced (value, jvp)
+        assert (n_theirs >= 100 * n_ours >= 100) if active else (n_ours == n_theirs), n_ours

@@ -39,6 +39,7 @@ from .._status import Status
 from .._types import Array, Float, Matrix3, Scalar, Vector3
 from ..constants import SECONDS_PER_DAY
 from ..geometry.kepler import time_since_periapsis
+from ..integrate import ForwardMode
 from .ephemeris import AU_M, GM_PLANETS, GM_SUN, planet_index, planet_state, planet_states
 
 SOLAR_PRESSURE_1AU = 4.5605e-6
@@ -272,7 +273,7 @@ def _solve(model, field, t0, t1, y0, event=None):
         stepsize_controller=diffrax.PIDController(rtol=model.rtol, atol=model.atol),
         event=event,
         max_steps=model.max_steps,
-        adjoint=diffrax.ForwardMode(),
+        adjoint=ForwardMode(),
         saveat=diffrax.SaveAt(t1=True),
         throw=False,
     )
