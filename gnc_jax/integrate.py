@@ -145,7 +145,7 @@ def _loop_with_a_looped_clip_floor(loop):
     threshold by 100 calls of ``eqxi.prevbefore`` in a Python loop, which a solve whose ``t1``
     is traced (an encounter window, a fix epoch: every solve of a study) compiles as a chain of
     100 ``nextafter`` operations. Measured on the midcourse study (nine solves): a third of its
-    XLA compile time, 24.8 -> 16.6 s, and 1.4 s of its tracing. The copy runs the same function
+    XLA compile time, 24.8 -> 16.4 s, and 1.4 s of its tracing. The copy runs the same function
     the same number of times in a loop (one call here, ``range`` of one): equal bit for bit
     (tests/test_integrate.py), one call compiled."""
     try:
