@@ -15,6 +15,8 @@ The test below checks it by direct numerical integration over the disc (scipy), 
 the renderer, and then checks the renderer + centroiding against it.
 """
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -44,8 +46,11 @@ def sphere(phase_deg=0.0, axes=(R, R, R), c_bi=None):
     return TargetModel(jnp.asarray(axes, float), jnp.eye(3) if c_bi is None else c_bi, sun)
 
 
+@jax.jit
 def measure(target, rho, bin_, offset_px, key=None):
-    """Render the target at ``offset_px`` (binned px) from the ROI centre; return (err_px, c)."""
+    """Render the target at ``offset_px`` (binned px) from the ROI centre; return (err_px, c).
+    One compiled program for every target, range, binning and offset (op by op, the first
+    call would compile each of its ~150 operations on its own)."""
     uv_true = jnp.asarray(offset_px) * CAM.ifov_rad * bin_
     r = rho * jnp.array([uv_true[0], uv_true[1], 1.0])
     frame = render_frame(CAM, target, jnp.eye(3), r, jnp.zeros(2), bin_, key)
@@ -145,10 +150,16 @@ def test_ellipsoid_flux_outline_and_sphere_limit():
     np.testing.assert_allclose(f_sph.dn, f_ell.dn, atol=1.0)
 
 
+@jax.jit
+@functools.partial(jax.vmap, in_axes=(0, 0, None, None))
+def _noisy_errors(offset_px, key, rho, bin_):
+    return measure(sphere(), rho, bin_, offset_px, key)[0]
+
+
 def noise_sigma_urad(rho, bin_, n=300):
     offsets = jax.random.uniform(jax.random.key(1), (n, 2), minval=-0.5, maxval=0.5)
     keys = jax.random.split(jax.random.key(0), n)
-    err = jax.jit(jax.vmap(lambda o, k: measure(sphere(), rho, bin_, o, k)[0]))(offsets, keys)
+    err = _noisy_errors(offsets, keys, float(rho), float(bin_))  # one program for all three
     return float(np.std(np.asarray(err))) * float(CAM.ifov_rad) * bin_ * 1e6
 
 
@@ -204,20 +215,12 @@ def test_default_label_sweeps_converge_on_target_frames():
 def test_two_targets_the_brightest_wins():
     """Two blobs: the component with the larger summed grey level is centroided."""
     rho = 5e7
-    big = render_frame(
-        CAM, sphere(), jnp.eye(3), jnp.array([0.0, 0.0, rho]), jnp.zeros(2), 1, None
-    ).dn
-    small = render_frame(
-        CAM,
-        sphere(axes=(1500.0, 1500.0, 1500.0)),
-        jnp.eye(3),
-        jnp.array([-10.0 * float(CAM.ifov_rad), -10.0 * float(CAM.ifov_rad), 1.0]) * rho,
-        jnp.zeros(2),
-        1,
-        None,
-    ).dn
+    frame = jax.jit(lambda t, r: render_frame(CAM, t, jnp.eye(3), r, jnp.zeros(2), 1, None).dn)
+    big = frame(sphere(), jnp.array([0.0, 0.0, rho]))
+    offset = -10.0 * float(CAM.ifov_rad)
+    small = frame(sphere(axes=(1500.0, 1500.0, 1500.0)), jnp.array([offset, offset, 1.0]) * rho)
     both = big + small - float(CAM.bias_dn)
-    c = extract_centroid(both, 9, CAM.label_iterations)
+    c = jax.jit(extract_centroid, static_argnums=(1, 2))(both, 9, CAM.label_iterations)
     assert int(c.n_components) == 2
     assert np.abs(np.asarray(c.pixel_xy) - 16.0).max() < 0.5  # the big one, at the centre
 
