@@ -39,6 +39,7 @@ def measure(system_name, mode, runs, short, n_params):
 
     import gnc_jax as gj
     from gnc_jax import tuning
+    from gnc_jax._numerics import using_loop_shape
 
     system = gj.get_system(system_name)
     scenario = gj.load_scenario(
@@ -78,7 +79,8 @@ def measure(system_name, mode, runs, short, n_params):
     grad = jax.grad(f)
     fn = {"value": f, "forward": jax.jacfwd(f), "reverse": grad, "reverse-any": grad}[mode]
     t0 = time.perf_counter()
-    compiled = jax.jit(fn).lower(theta).compile()
+    with using_loop_shape(problem.loop_shape):  # the layout the tuner traces in
+        compiled = jax.jit(fn).lower(theta).compile()
     compile_s = time.perf_counter() - t0
     best = cpu = float("inf")
     for _ in range(2):

@@ -904,3 +904,25 @@ def test_auto_gradient_mode_follows_the_number_of_parameters(monkeypatch):
     )
     with pytest.raises(ScenarioError, match="gradient"):
         tune(toy(), "guidance.pn.n", gradient="sideways", **kw)
+
+
+def test_the_tuners_programs_are_traced_in_the_systems_loop_layout():
+    """A tuning flies the loops in the layout a study of its system flies on that platform
+    (``for_platform``, or the one set by ``using_loop_shape`` when the problem is built),
+    wherever its programs are first called."""
+    from gnc_jax._numerics import LoopShape, for_platform, loop_shape, using_loop_shape
+
+    scenario = toy()
+    objective = parse_objective("miss_rms", scenario)
+    gains = resolve_gains(scenario, ["guidance.pn.n"])
+    problem = tune_module.TuningProblem(scenario, gains, objective, seed=0)
+    assert problem.loop_shape == for_platform(jax.default_backend(), problem.system)
+    shape = LoopShape(fence=False, unroll=3, early_exit=False)
+    with using_loop_shape(shape):
+        placed = tune_module.TuningProblem(scenario, gains, objective, seed=0)
+    assert placed.loop_shape == shape
+    probe = lambda: lambda x: x + loop_shape().unroll  # noqa: E731  (read at trace time)
+    assert float(placed.jitted("layout-probe", probe)(1.0)) == 4.0
+    assert float(problem.jitted("layout-probe", probe)(1.0)) == 1.0 + problem.loop_shape.unroll
+    executable, _ = placed.compiled("layout-probe", probe, 1.0)
+    assert float(executable(1.0)) == 4.0

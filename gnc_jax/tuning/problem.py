@@ -15,6 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._numerics import explicit_loop_shape, for_platform, using_loop_shape
 from ..montecarlo import batch_function, build
 from ..params import declared_params
 from ..scenario import Scenario
@@ -71,6 +72,10 @@ class TuningProblem:
         if self.system.reverse_on_one_device and self.n_dev > 1:
             devices = backend.devices[:1] if placed else None
             self.reverse_fn = batch_function(self.system, n_devices=1, devices=devices)[0]
+        # the loops are traced in the layout a study of this system flies on this platform
+        self.loop_shape = explicit_loop_shape() or for_platform(
+            self.platform or jax.default_backend(), self.system
+        )
         self.seed_arr = jnp.asarray(seed, dtype=jnp.uint32)
         self.term_weights = objective.weights
         spec = declared_params(type(self.law)).get("temperature")
@@ -92,14 +97,15 @@ class TuningProblem:
         return (self.system.reverse_mode(self.sim, names),) + self.args[1:]
 
     def jitted(self, kind: str, build_fn):
+        """``build_fn()`` jitted, traced in the system's loop layout (:attr:`loop_shape`)."""
         key = (
             kind, self.system, self.objective.structure, self.param, self.gains, self.n_dev,
-            self.platform,
+            self.platform, self.loop_shape,
         )  # fmt: skip
         if key not in _JITTED:
             if len(_JITTED) >= 32:
                 _JITTED.pop(next(iter(_JITTED)))
-            _JITTED[key] = jax.jit(build_fn())
+            _JITTED[key] = jax.jit(_traced_in(self.loop_shape, build_fn()))
         return _JITTED[key]
 
     def compiled(self, kind: str, build_fn, *args):
@@ -109,7 +115,7 @@ class TuningProblem:
         shapes = tuple((jnp.shape(x), jnp.result_type(x)) for x in leaves)
         key = (
             kind, self.system, self.objective.structure, self.param, self.gains, treedef, shapes,
-            self.platform,
+            self.platform, self.loop_shape,
         )  # fmt: skip
         if key in _COMPILED:
             return _COMPILED[key], 0.0
@@ -184,6 +190,17 @@ class TuningProblem:
     def hard_outcomes(self, gains_file, indices):
         fn = self.jitted("hard", lambda: self.hard)
         return fn(self.args, jnp.asarray(gains_file), indices, jnp.ones(len(indices)))[1]
+
+
+def _traced_in(shape, fn):
+    """``fn``, traced in the loop layout ``shape`` (:func:`~gnc_jax._numerics.using_loop_shape`)."""
+
+    @functools.wraps(fn)
+    def traced(*args):
+        with using_loop_shape(shape):
+            return fn(*args)
+
+    return traced
 
 
 def _is_schedule(law, attribute) -> bool:
