@@ -220,6 +220,13 @@ def explicit_loop_shape() -> LoopShape | None:
     return _LOOP_SHAPE.get()
 
 
+def layout_for(platform: str, system=None) -> LoopShape:
+    """The :class:`LoopShape` a study of ``system`` is traced with on ``platform``: the one set
+    by :func:`using_loop_shape`, else the platform's default for the system
+    (:func:`for_platform`)."""
+    return explicit_loop_shape() or for_platform(platform, system)
+
+
 @contextlib.contextmanager
 def using_loop_shape(shape: LoopShape | None):
     """Trace the closed loops with ``shape`` inside the block (None: the platform's default),

@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._numerics import explicit_loop_shape, for_platform, using_loop_shape
+from ._numerics import layout_for, using_loop_shape
 from ._random import plan_key
 from .backend import describe, placement, select
 from .montecarlo import MAX_HOURS, MAX_MEMORY_FRACTION, _check_memory, build, structure
@@ -86,7 +86,7 @@ def run_cells(
                 results[n] = e
                 continue
             groups.setdefault(structure(built), []).append((n, built))
-        shape = explicit_loop_shape() or for_platform(backend.platform, system)
+        shape = layout_for(backend.platform, system)
         for members in groups.values():
             outs, compile_s, wall_s, chunk = _run_group(
                 system, scenarios[members[0][0]], [b for _, b in members], runs, seed, backend,

@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, PartitionSpec
 
-from ._numerics import explicit_loop_shape, for_platform, using_lanes, using_loop_shape
+from ._numerics import layout_for, using_lanes, using_loop_shape
 from ._random import DrawPlan, plan_key, run_key
 from .backend import Backend, placement, require, select
 from .planner import (
@@ -112,7 +112,7 @@ def _compile(system, fn, where, sim, law, seed_arr, chunk):
     dtypes of (sim, law, seed). Gains and scenario values are arguments, so a new value does not
     recompile.
     """
-    shape = explicit_loop_shape() or for_platform(where[0][0].platform, system)
+    shape = layout_for(where[0][0].platform, system)
     key = (system, where, chunk, shape, structure((sim, law, seed_arr)))
     if key in _COMPILED:
         return _COMPILED[key], 0.0
@@ -361,7 +361,7 @@ def simulate_one(scenario: Scenario, index: int = 0, seed: int | None = None, re
     system = get_system(scenario.kind)
     sim, law = build(scenario)
     seed = scenario.seed if seed is None else seed
-    shape = explicit_loop_shape() or for_platform(jax.default_backend(), system)
+    shape = layout_for(jax.default_backend(), system)
     with using_loop_shape(shape):
         out, trace = _jitted_single(system, shape)(sim, law, run_key(seed, index), record=record)
     return jax.tree_util.tree_map(np.asarray, out), jax.tree_util.tree_map(np.asarray, trace)
@@ -378,7 +378,7 @@ def simulate_traces(
     system = get_system(scenario.kind)
     sim, law = build(scenario)
     seed = scenario.seed if seed is None else seed
-    shape = explicit_loop_shape() or for_platform(jax.default_backend(), system)
+    shape = layout_for(jax.default_backend(), system)
     fn = _batched_traces(system, every, shape)
     indices = np.asarray(indices, dtype=int)
     outs, traces = [], []

@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._numerics import explicit_loop_shape, for_platform, using_loop_shape
+from .._numerics import layout_for, using_loop_shape
 from ..montecarlo import batch_function, build
 from ..params import declared_params
 from ..scenario import Scenario
@@ -73,9 +73,7 @@ class TuningProblem:
             devices = backend.devices[:1] if placed else None
             self.reverse_fn = batch_function(self.system, n_devices=1, devices=devices)[0]
         # the loops are traced in the layout a study of this system flies on this platform
-        self.loop_shape = explicit_loop_shape() or for_platform(
-            self.platform or jax.default_backend(), self.system
-        )
+        self.loop_shape = layout_for(self.platform or jax.default_backend(), self.system)
         self.seed_arr = jnp.asarray(seed, dtype=jnp.uint32)
         self.term_weights = objective.weights
         spec = declared_params(type(self.law)).get("temperature")
