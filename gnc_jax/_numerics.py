@@ -7,6 +7,7 @@ a value that is never zero on the branch that is kept (the usual double-``where`
 
 import contextlib
 import contextvars
+import math
 from typing import NamedTuple
 
 import jax
@@ -176,7 +177,14 @@ class LoopShape(NamedTuple):
     (:class:`V3`: the intercept's whole loop state, the impactor's filter mean through its
     control steps): on a GPU a 3-vector stacked under ``vmap`` is a kernel and a transpose of
     its own; on a CPU the three times as many loop outputs measured slower (``bennu-apn``,
-    200 runs: about 1.5x).
+    200 runs: about 1.5x). ``rare``: a closed loop that supports it flies each stretch of
+    its loop first on the cheap path that a run takes when nothing happens in it (the
+    impactor's image interval coasting), then recomputes on the full path only the runs where
+    something did (the engine fired), gathered into ``rare`` of the batch's lanes
+    (:func:`rarely`; ``0``: every run on the full path). On a CPU every lane of a vectorised
+    batch otherwise computes the work of the few runs that need it, as a branch in a scalar
+    loop does not. It compiles the full path twice (two widths), so a study turns it on only
+    where its runs repay that (:class:`RareLayout`).
 
     The defaults are per platform (:func:`for_platform`), measured on each: on a CPU a fence
     saves XLA recomputing the command in every consumer loop and unrolling gains nothing
@@ -192,6 +200,18 @@ class LoopShape(NamedTuple):
     unroll: int = 1
     early_exit: bool = True
     components: bool = False
+    rare: float = 0.0
+
+
+class RareLayout(NamedTuple):
+    """When a system's study on the CPU runs its closed loop in the ``rare`` layout
+    (:attr:`LoopShape.rare` = ``fraction``): a study of at least ``min_runs`` runs, in device
+    batches of at least ``min_lanes`` runs. Below, the gathered lanes' fixed cost per step
+    and the second compilation cost more than the skipped work saves."""
+
+    fraction: float
+    min_runs: int
+    min_lanes: int
 
 
 _PLATFORM_SHAPES = {"cpu": LoopShape(fence=True, unroll=1, early_exit=True)}
@@ -258,6 +278,76 @@ def lanes_per_device() -> int | None:
     """The runs per device of the batch being traced, where the caller says
     (:func:`using_lanes`: a study's compiled chunk); ``None`` when unknown."""
     return _LANES.get()
+
+
+def rarely(pred, taken, otherwise, operands, fraction: float):
+    """``taken(operands)`` where ``pred`` holds, else ``otherwise(operands)``, for a ``taken``
+    that few runs of a batch take.
+
+    Unbatched this is a ``lax.cond``. Under ``vmap`` (where a ``lax.cond`` computes both
+    branches for every run) ``otherwise`` runs for the whole batch and ``taken`` only for the
+    runs where ``pred`` holds, gathered into ``max(8, ceil(fraction * batch))`` lanes and
+    written back over ``otherwise``'s results; when more runs take it, ``taken`` runs for the
+    whole batch and is selected where ``pred`` holds; when none does, ``taken`` is skipped.
+    Each run's value is its branch's, whatever the batch and the other runs (up to the
+    rounding of a program compiled for another width).
+
+    ``operands``: a pytree of arrays (batched or not); ``taken`` and ``otherwise`` map it to
+    pytrees of the same structure, shapes and dtypes, and may close over traced values.
+    """
+    taken_c, taken_consts = jax.closure_convert(taken, operands)
+    other_c, other_consts = jax.closure_convert(otherwise, operands)
+    flat, tree = jax.tree_util.tree_flatten((operands, list(taken_consts), list(other_consts)))
+
+    def take(xs):
+        ops, consts, _ = tree.unflatten(list(xs))
+        return taken_c(ops, *consts)
+
+    def skip(xs):
+        ops, _, consts = tree.unflatten(list(xs))
+        return other_c(ops, *consts)
+
+    @jax.custom_batching.custom_vmap
+    def branch(p, *xs):
+        return jax.lax.cond(p, take, skip, xs)
+
+    @branch.def_vmap
+    def batched(size, in_batched, p, *xs):
+        axes = [0 if b else None for b in in_batched[1:]]
+        p = p if in_batched[0] else jnp.broadcast_to(p, (size,))
+        over = lambda fn: jax.vmap(lambda *x: fn(x), in_axes=axes)  # noqa: E731
+        base = jax.tree_util.tree_map(
+            lambda x, s: jnp.broadcast_to(x, (size,) + s.shape),
+            over(skip)(*xs),
+            jax.eval_shape(skip, [x[0] if b else x for x, b in zip(xs, in_batched[1:])]),
+        )
+        slots = min(size, max(8, math.ceil(fraction * size)))
+
+        def along(m, x):  # a per-run mask against a batched leaf
+            return m.reshape(m.shape + (1,) * (x.ndim - 1))
+
+        def everyone():
+            done = over(take)(*xs)
+            return jax.tree_util.tree_map(lambda u, v: jnp.where(along(p, v), u, v), done, base)
+
+        def gathered():
+            flags, idx = jax.lax.top_k(p.astype(jnp.float32), slots)
+            some = [x[idx] if b else x for x, b in zip(xs, in_batched[1:])]
+            done = over(take)(*some)
+
+            def put(u, v):
+                here = v[idx]
+                new = jnp.where(along(flags > 0, here), u, here)
+                return v.at[idx].set(new, unique_indices=True)
+
+            return jax.tree_util.tree_map(put, done, base)
+
+        count = jnp.sum(p, dtype=jnp.int32)
+        which = jnp.where(count == 0, 0, jnp.where(count <= slots, 1, 2))
+        out = jax.lax.switch(which, [lambda: base, gathered, everyone])
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+
+    return branch(pred, *flat)
 
 
 def computed_once(fn, live, *args, adjoint=None):
@@ -425,6 +515,7 @@ def safe_unit(v: Vector3, fallback: Vector3) -> Vector3:
 
 __all__ = [
     "LoopShape",
+    "RareLayout",
     "V3",
     "as_array",
     "as_v3",
@@ -441,6 +532,7 @@ __all__ = [
     "matmul",
     "matvec3",
     "norm3",
+    "rarely",
     "safe_norm",
     "safe_unit",
     "vector3",

@@ -7,6 +7,7 @@ Run ``i`` of a study with root seed ``s`` always uses the key
 the chunking, the devices, the workers or on resuming.
 """
 
+import contextlib
 import dataclasses
 import hashlib
 import sys
@@ -16,6 +17,7 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
+from ._numerics import explicit_loop_shape, for_platform, using_loop_shape
 from ._status import Status
 from .backend import describe, require, select
 from .montecarlo import (
@@ -218,7 +220,8 @@ def run_study(
     plan = LocalPlan(backend, n_devices, max_memory_fraction, fixed, None, built)
     todo = chunks_left(out, bounds) if resume else list(range(n_chunks))
     if not distributed and todo:
-        plan = _compile_local(system, keys, chunk, plan)
+        with _study_layout(system, backend, runs, chunk // n_dev):
+            plan = _compile_local(system, keys, chunk, plan)
     store = None if out is None else StudyStore(out, manifest, resume, overwrite)
     try:
         parts, compile_s, wall_s, n_workers, write_s = _run_chunks(
@@ -232,6 +235,22 @@ def run_study(
     finally:
         if store is not None:
             store.close()
+
+
+def _study_layout(system, backend, runs: int, lanes: int):
+    """The loop layout a local study compiles in: the system's CPU layout with its ``rare``
+    path on where the system declares one (:attr:`AbstractSystem.rare_layout`) and the study
+    is large enough to repay it, else the default (a layout the caller set is kept)."""
+    rare = system.rare_layout
+    if (
+        rare is None
+        or explicit_loop_shape() is not None
+        or backend.platform != "cpu"
+        or runs < rare.min_runs
+        or lanes < rare.min_lanes
+    ):
+        return contextlib.nullcontext()
+    return using_loop_shape(for_platform("cpu", system)._replace(rare=rare.fraction))
 
 
 def check_seed(seed) -> int:

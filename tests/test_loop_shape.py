@@ -8,8 +8,11 @@ the accelerator's fixed bound at the corrector (tests/guidance/entry/test_skip_e
 it is the only difference: in the closed loop, unrolled whole, it takes most of a compilation.
 """
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
+from short_impactor import SHORT
 
 import gnc_jax as gj
 from gnc_jax import montecarlo
@@ -17,7 +20,9 @@ from gnc_jax._numerics import (
     LoopShape,
     computed_once,
     for_platform,
+    layout_for,
     loop_shape,
+    rarely,
     using_loop_shape,
 )
 
@@ -110,3 +115,90 @@ def test_compiled_programs_are_cached_per_layout():
         assert for_platform("cpu") in shapes
     else:
         pytest.fail("the study test above should have compiled programs in this process")
+
+
+def _brute(pred, x, a):
+    return np.where(pred, x * a + 1.0, x - a)
+
+
+@pytest.mark.parametrize("taking", [0, 3, 8, 11])
+def test_rarely_gives_each_run_its_branch_whatever_the_count(taking):
+    """Under vmap, none, a few (gathered), and more runs than the gathered lanes (the whole
+    batch): each run gets its branch's value, with a batched and an unbatched closed-over
+    value and an unbatched operand; unbatched it is a conditional; forward mode through it."""
+    n = 24
+    x = jnp.linspace(-1.0, 2.0, n)
+    pred = np.zeros(n, bool)
+    pred[np.random.default_rng(taking).choice(n, taking, replace=False)] = True
+    shift = jnp.arange(n) * 0.5
+
+    def f(p, xi, s, a):
+        return rarely(
+            p,
+            lambda o: (o[0] * o[1] + 1.0, jnp.stack([s, o[0]])),
+            lambda o: (o[0] - o[1], jnp.stack([s, -o[0]])),
+            (xi, a),
+            1 / 3,  # 8 lanes for 24 runs
+        )
+
+    vf = jax.jit(jax.vmap(f, in_axes=(0, 0, 0, None)))
+    y, pair = vf(jnp.asarray(pred), x, shift, 1.5)
+    np.testing.assert_allclose(y, _brute(pred, np.asarray(x), 1.5), rtol=1e-15, atol=0)
+    np.testing.assert_array_equal(pair[:, 0], shift)
+    np.testing.assert_array_equal(pair[:, 1], np.where(pred, x, -x))
+    i = int(np.argmax(pred)) if taking else 0
+    single = jax.jit(f)(jnp.asarray(pred[i]), x[i], shift[i], 1.5)[0]
+    np.testing.assert_allclose(single, _brute(pred[i], float(x[i]), 1.5), rtol=1e-15)
+    _, dy = jax.jvp(lambda a: vf(jnp.asarray(pred), x, shift, a)[0], (1.5,), (1.0,))
+    np.testing.assert_allclose(dy, np.where(pred, x, -1.0), rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("gravity", [False, True])
+def test_impactor_rare_layout_matches_within_batch_tolerance(gravity):
+    """The impactor's intervals coasted by every run and flown again by the runs that fired
+    (LoopShape.rare), forced at 4 lanes a device (at least 8, so at most 8 of 32 runs are
+    gathered; the first intervals fire in every run, the whole batch): per-run outcomes equal
+    the default layout's within batch_tolerance, statuses and counts identical; with the
+    target's gravity on, the coast is an RK4 step of it."""
+    system = gj.get_system("impactor")
+    extra = ["dynamics.mu_target_m3s2=5.0"] if gravity else []
+    scenario = gj.load_scenario(system.example, overrides=SHORT + extra)
+    study = dict(runs=64, seed=11, chunk_size=64, progress=False)
+    default = gj.run_study(scenario, **study)
+    with using_loop_shape(for_platform("cpu", system)._replace(rare=1 / 8)):
+        rare = gj.run_study(scenario, **study)
+    assert rare.compile_s > 0.0, "the rare layout must compile its own program"
+    assert default.summary()["failed"] == 0, default.summary()["failed_by_status"]
+    assert np.asarray(default.outcomes["firings"]).min() >= 1
+    rtol, atol = system.batch_tolerance
+    for field, x in default.outcomes.items():
+        x, y = np.asarray(x), np.asarray(rare.outcomes[field])
+        if np.issubdtype(x.dtype, np.floating):
+            np.testing.assert_allclose(y, x, rtol=rtol, atol=atol, err_msg=field)
+        else:
+            np.testing.assert_array_equal(y, x, err_msg=field)
+
+
+def test_a_study_turns_the_rare_layout_on_only_where_it_pays():
+    from gnc_jax.backend import Backend
+    from gnc_jax.study import _study_layout
+
+    system = gj.get_system("impactor")
+    rare = system.rare_layout
+    cpu = Backend("cpu", "cpu", (0, 1), 1 << 34)
+    gpu = Backend("gpu", "NVIDIA H100", (0,), 1 << 36)
+
+    def shape(backend, runs, lanes):
+        with _study_layout(system, backend, runs, lanes):
+            return layout_for(backend.platform, system)
+
+    on = for_platform("cpu", system)._replace(rare=rare.fraction)
+    assert shape(cpu, rare.min_runs, rare.min_lanes) == on
+    assert shape(cpu, rare.min_runs - 1, rare.min_lanes).rare == 0.0
+    assert shape(cpu, rare.min_runs, rare.min_lanes - 1).rare == 0.0
+    assert shape(gpu, rare.min_runs, rare.min_lanes) == for_platform("gpu", system)
+    assert gj.get_system("capsule").rare_layout is None
+    assert shape(cpu, 10**6, 2048) == on
+    chosen = for_platform("cpu", system)._replace(unroll=1)
+    with using_loop_shape(chosen):  # a layout the caller chose is kept
+        assert shape(cpu, 10**6, 2048) == chosen

@@ -134,6 +134,9 @@ class AbstractSystem(abc.ABC):
             cache, or whose lock-step loops wait longer for the slowest run, is slower per
             run; too small a batch pays the per-operation overhead); ``None``: 1024 runs per
             call.
+        rare_layout: a :class:`~gnc_jax._numerics.RareLayout`: when a study on the CPU runs
+            the closed loop in the layout that computes rarely taken work only for the runs
+            that take it (:attr:`~gnc_jax._numerics.LoopShape.rare`); ``None``: never.
         vector_lanes: a device batch of 64 runs or more is padded to a multiple of this
             (``montecarlo.padded_chunk``), measured per system: 8 where the loop is
             elementwise work that XLA vectorises (a batch off the SIMD width ran 1.6x slower
@@ -170,6 +173,7 @@ class AbstractSystem(abc.ABC):
     step_costs: ClassVar[dict[str, StepCost]] = {}
     run_bytes: ClassVar[int] = 16_000
     chunk_per_device: ClassVar[int | None] = None
+    rare_layout: ClassVar[Any] = None
     vector_lanes: ClassVar[int] = 1
     envelope_metrics: ClassVar[dict[str, str]] = {"failed_fraction": "failed fraction"}
     error_sources: ClassVar[dict[str, ErrorSource]] = {}
