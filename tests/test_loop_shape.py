@@ -156,10 +156,11 @@ def test_rarely_gives_each_run_its_branch_whatever_the_count(taking):
 @pytest.mark.parametrize("gravity", [False, True])
 def test_impactor_rare_layout_matches_within_batch_tolerance(gravity):
     """The impactor's intervals coasted by every run and flown again by the runs that fired
-    (LoopShape.rare), forced at 4 lanes a device (at least 8, so at most 8 of 32 runs are
-    gathered; the first intervals fire in every run, the whole batch): per-run outcomes equal
-    the default layout's within batch_tolerance, statuses and counts identical; with the
-    target's gravity on, the coast is an RK4 step of it."""
+    (LoopShape.rare), forced on a study of 32 runs a device (8 lanes gathered; the first
+    intervals fire in every run: the whole batch): per-run outcomes equal the default
+    layout's within batch_tolerance (the gathered lanes are a program of another width),
+    statuses and counts identical; with the target's gravity on, the coast's RK4 step
+    evaluates it."""
     system = gj.get_system("impactor")
     extra = ["dynamics.mu_target_m3s2=5.0"] if gravity else []
     scenario = gj.load_scenario(system.example, overrides=SHORT + extra)

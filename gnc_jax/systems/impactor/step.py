@@ -144,23 +144,22 @@ def control_step(sim: ImpactorSimulation, law, accel_bias, record, state: LoopSt
 def coast_step(sim: ImpactorSimulation, law, carry, inputs):
     """:func:`control_step` for a run whose engine stays off, and whether it did: the law's
     command, the truth's RK4 step without thrust and the estimate's straight-line mean, the
-    same operations as the full step's with a zero throttle (their zero terms left out); the
-    engine's memory, the accelerometer and the tally are untouched. ``carry``: ``(state,
-    fired)``, ``fired`` set once the law commands a throttle other than zero (the step is
-    then not this one's: :func:`image_step` flies that run again on the full path)."""
+    full step's operations with a zero throttle (its zero Δv terms left out, which adds
+    nothing); the engine's memory, the accelerometer and the tally are untouched.
+    ``carry``: ``(state, fired)``, ``fired`` set once the law commands a throttle other than
+    zero (the step is then not this one's: :func:`image_step` flies that run again on the
+    full path)."""
     state, fired = carry
     ctx, dt = sim.context, sim.context.dt_s
     t, _ = inputs
     estimate = state.estimate
     # Not fenced: the command's only consumers are the law's state and the flag.
     command, law_state = law.step(state.law, estimate.nav, t, ctx)
-    y = state.truth
-    if sim.dynamics.active:
-        truth = rk4(sim.dynamics, y, V3(*(jnp.zeros_like(y.m),) * 3), jnp.zeros_like(y.m), dt)
-    else:  # rk4's step with zero acceleration: every stage's velocity is v
-        truth = y._replace(
-            r=V3(*(r + dt / 6.0 * (v + 2.0 * v + 2.0 * v + v) for r, v in zip(y.r, y.v)))
-        )
+    zero = jnp.zeros_like(state.truth.m)
+    # rk4 itself with no thrust: the same bits as the full step's (a closed form of the
+    # unpowered step measured 2 % faster but moved the last bits), fenced as there.
+    fence = computed_once if sim.dynamics.active else _inline
+    truth = fence(lambda y: rk4(sim.dynamics, y, V3(zero, zero, zero), zero, dt), t, state.truth)
     new = state._replace(
         truth=truth,
         estimate=estimate._replace(r_hat=estimate.r_hat + estimate.v_hat * dt),
@@ -239,9 +238,8 @@ def image_step(
     if loop_shape().rare and not (record or sim.reverse_mode or getattr(law, "relaxed", False)):
         # The engine fires in about 0.5 % of the control steps (deep-impact-los). Every run
         # first coasts through the interval; the runs whose law commanded thrust fly it again
-        # on the full path, gathered (rarely). Each run's steps are those of the full loop,
-        # their zero terms left out: the outcomes agree to rounding (2,000 runs: miss within
-        # 1e-9 m, Δv, firings and statuses equal).
+        # on the full path, gathered (rarely). Each run's steps are those of the full loop
+        # (8,192 runs: every outcome equal to the last bit).
         coast = functools.partial(coast_step, sim, law)
         (coasted, fired), _ = jax.lax.scan(
             coast, (start, jnp.zeros((), bool)), inputs, unroll=unroll
