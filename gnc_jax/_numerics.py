@@ -286,9 +286,10 @@ def rarely(pred, taken, otherwise, operands, fraction: float):
 
     Unbatched this is a ``lax.cond``. Under ``vmap`` (where a ``lax.cond`` computes both
     branches for every run) ``otherwise`` runs for the whole batch and ``taken`` only for the
-    runs where ``pred`` holds, gathered into ``max(8, ceil(fraction * batch))`` lanes and
-    written back over ``otherwise``'s results; when more runs take it, ``taken`` runs for the
-    whole batch and is selected where ``pred`` holds; when none does, ``taken`` is skipped.
+    runs where ``pred`` holds, gathered into ``fraction`` of the batch's lanes (rounded up
+    to a multiple of 8) and written back over ``otherwise``'s results; when more runs take
+    it, ``taken`` runs for the whole batch and is selected where ``pred`` holds; when none
+    does, ``taken`` is skipped.
     Each run's value is its branch's, whatever the batch and the other runs (up to the
     rounding of a program compiled for another width).
 
@@ -321,7 +322,8 @@ def rarely(pred, taken, otherwise, operands, fraction: float):
             over(skip)(*xs),
             jax.eval_shape(skip, [x[0] if b else x for x, b in zip(xs, in_batched[1:])]),
         )
-        slots = min(size, max(8, math.ceil(fraction * size)))
+        # A multiple of 8 lanes: at 63 the gathered program's remainder loop moved last bits.
+        slots = min(size, 8 * max(1, math.ceil(fraction * size / 8)))
 
         def along(m, x):  # a per-run mask against a batched leaf
             return m.reshape(m.shape + (1,) * (x.ndim - 1))
