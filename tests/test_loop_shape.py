@@ -54,10 +54,16 @@ def test_accelerator_layout_on_cpu_matches_within_batch_tolerance(name):
     with using_loop_shape(closed_loop_layout(gj.get_system(name))):  # what a GPU compiles
         acc = gj.run_study(scenario, **study)
     assert acc.compile_s > 0.0, "the forced layout must compile its own program"
-    assert cpu.summary()["failed"] == 0, cpu.summary()["failed_by_status"]
-    rtol, atol = gj.get_system(name).batch_tolerance
-    for field, x in cpu.outcomes.items():
-        x, y = np.asarray(x), np.asarray(acc.outcomes[field])
+    assert_same_outcomes(acc, cpu, gj.get_system(name))
+
+
+def assert_same_outcomes(got, reference, system):
+    """``got``'s per-run outcomes equal ``reference``'s (a study without failed runs) within
+    ``system.batch_tolerance``; statuses and counts identical."""
+    assert reference.summary()["failed"] == 0, reference.summary()["failed_by_status"]
+    rtol, atol = system.batch_tolerance
+    for field, x in reference.outcomes.items():
+        x, y = np.asarray(x), np.asarray(got.outcomes[field])
         if np.issubdtype(x.dtype, np.floating):
             np.testing.assert_allclose(y, x, rtol=rtol, atol=atol, err_msg=field)
         else:
@@ -169,15 +175,8 @@ def test_impactor_rare_layout_matches_within_batch_tolerance(gravity):
     with using_loop_shape(for_platform("cpu", system)._replace(rare=1 / 8)):
         rare = gj.run_study(scenario, **study)
     assert rare.compile_s > 0.0, "the rare layout must compile its own program"
-    assert default.summary()["failed"] == 0, default.summary()["failed_by_status"]
     assert np.asarray(default.outcomes["firings"]).min() >= 1
-    rtol, atol = system.batch_tolerance
-    for field, x in default.outcomes.items():
-        x, y = np.asarray(x), np.asarray(rare.outcomes[field])
-        if np.issubdtype(x.dtype, np.floating):
-            np.testing.assert_allclose(y, x, rtol=rtol, atol=atol, err_msg=field)
-        else:
-            np.testing.assert_array_equal(y, x, err_msg=field)
+    assert_same_outcomes(rare, default, system)
 
 
 def test_a_study_turns_the_rare_layout_on_only_where_it_pays():
