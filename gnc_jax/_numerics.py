@@ -289,9 +289,8 @@ def rarely(pred, taken, otherwise, operands, fraction: float):
     runs where ``pred`` holds, gathered into ``fraction`` of the batch's lanes (rounded up
     to a multiple of 8) and written back over ``otherwise``'s results; when more runs take
     it, ``taken`` runs for the whole batch and is selected where ``pred`` holds; when none
-    does, ``taken`` is skipped.
-    Each run's value is its branch's, whatever the batch and the other runs (up to the
-    rounding of a program compiled for another width).
+    does, ``taken`` is skipped. Each run's value is its branch's, whatever the batch and the
+    other runs (up to the rounding of a program compiled for another width).
 
     ``operands``: a pytree of arrays (batched or not); ``taken`` and ``otherwise`` map it to
     pytrees of the same structure, shapes and dtypes, and may close over traced values.
@@ -317,11 +316,7 @@ def rarely(pred, taken, otherwise, operands, fraction: float):
         axes = [0 if b else None for b in in_batched[1:]]
         p = p if in_batched[0] else jnp.broadcast_to(p, (size,))
         over = lambda fn: jax.vmap(lambda *x: fn(x), in_axes=axes)  # noqa: E731
-        base = jax.tree_util.tree_map(
-            lambda x, s: jnp.broadcast_to(x, (size,) + s.shape),
-            over(skip)(*xs),
-            jax.eval_shape(skip, [x[0] if b else x for x, b in zip(xs, in_batched[1:])]),
-        )
+        base = over(skip)(*xs)  # vmap gives every output the batch axis
         # A multiple of 8 lanes: at 63 the gathered program's remainder loop moved last bits.
         slots = min(size, 8 * max(1, math.ceil(fraction * size / 8)))
 

@@ -170,7 +170,9 @@ def coast_step(sim: ImpactorSimulation, law, carry, inputs):
 
 
 def _flown(state: LoopState):
-    """What an image interval's control steps change of the loop state."""
+    """What an image interval's control steps change of the loop state: all that the
+    two-pass interval gathers and writes back (the whole state through it measured the same
+    speed but moved the last bits of the image updates' tally, fused otherwise)."""
     e = state.estimate
     return (
         state.truth,
