@@ -12,6 +12,7 @@ progress bar.
 Compilation happens once, ahead of time, and is timed separately from the study.
 """
 
+import contextlib
 import functools
 import os
 import time
@@ -23,7 +24,13 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, PartitionSpec
 
-from ._numerics import layout_for, using_lanes, using_loop_shape
+from ._numerics import (
+    explicit_loop_shape,
+    for_platform,
+    layout_for,
+    using_lanes,
+    using_loop_shape,
+)
 from ._random import DrawPlan, plan_key, run_key
 from .backend import Backend, placement, require, select
 from .planner import (
@@ -234,6 +241,24 @@ def _joined(outs) -> dict:
     return {k: np.concatenate([np.asarray(p[k]) for p in parts]) for k in parts[0]}
 
 
+def study_layout(system, backend, runs: int, lanes: int):
+    """The loop layout a study's chunks compile in where they run (this process, or a Dask
+    worker): the system's CPU layout with its ``rare`` path on where the system declares one
+    (:attr:`~gnc_jax.systems.AbstractSystem.rare_layout`) and the study of ``runs`` runs, at
+    ``lanes`` runs a device, is large enough to repay it; else the default (a layout the
+    caller set is kept)."""
+    rare = system.rare_layout
+    if (
+        rare is None
+        or explicit_loop_shape() is not None
+        or backend.platform != "cpu"
+        or runs < rare.min_runs
+        or lanes < rare.min_lanes
+    ):
+        return contextlib.nullcontext()
+    return using_loop_shape(for_platform("cpu", system)._replace(rare=rare.fraction))
+
+
 def run_chunk(
     scenario: Scenario,
     seed: int,
@@ -243,13 +268,16 @@ def run_chunk(
     device: str = "auto",
     *,
     built: tuple,
+    study_runs: int | None = None,
 ):
     """Runs ``start .. stop-1`` of a study on this process's ``device`` (a Dask worker's task):
     ``(outcomes as numpy arrays, compile time)``. ``built``: the scenario's ``(params, law)``
     as the process that submitted the study built them (:func:`build_on`), so no worker
     builds it again (a midcourse nominal's targeting, a capsule's reference design). The chunk
-    is compiled once per process and chunk size (and read from JAX's persistent compilation
-    cache when the worker was started with one)."""
+    is compiled once per process, chunk size and layout (and read from JAX's persistent
+    compilation cache when the worker was started with one), in the layout a local study of
+    ``study_runs`` runs (default: the chunk's) would compile at this process's lanes a device
+    (:func:`study_layout`)."""
     system = get_system(scenario.kind)
     backend = select(device)
     with placement(backend):
@@ -258,7 +286,8 @@ def run_chunk(
         padded = padded_chunk(chunk, n_dev, system.vector_lanes)
         seed_arr = jnp.asarray(seed, dtype=jnp.uint32)
         where = _where(backend, backend.devices[:n_dev])
-        compiled, compile_s = _compile(system, fn, where, sim, law, seed_arr, padded)
+        with study_layout(system, backend, study_runs or stop - start, padded // n_dev):
+            compiled, compile_s = _compile(system, fn, where, sim, law, seed_arr, padded)
         out = compiled(sim, law, seed_arr, jnp.arange(start, start + padded))
     return {k: np.asarray(v)[: stop - start] for k, v in out._asdict().items()}, compile_s
 
@@ -301,11 +330,13 @@ def local_cluster(workers: int, option: str = "workers"):
     return distributed.Client(cluster)
 
 
-def _run_distributed(scenario, built, seed, todo, bounds, chunk, client, workers, finished, device):
-    """The chunks ``todo`` as tasks of a Dask client, each shipped the scenario's ``built``
-    ``(params, law)`` (:func:`run_chunk`); returns ``(compile time, errors, workers,
-    time.perf_counter() once the cluster was up)``. A lost worker's tasks are rerun elsewhere
-    by Dask; a chunk that raises is reported and the others go on."""
+def _run_distributed(
+    scenario, built, seed, todo, bounds, chunk, client, workers, finished, device, runs=None
+):  # fmt: skip
+    """The chunks ``todo`` of a study of ``runs`` runs as tasks of a Dask client, each shipped
+    the scenario's ``built`` ``(params, law)`` (:func:`run_chunk`); returns ``(compile time,
+    errors, workers, time.perf_counter() once the cluster was up)``. A lost worker's tasks are
+    rerun elsewhere by Dask; a chunk that raises is reported and the others go on."""
     as_completed = require("dask.distributed", "workers").as_completed
 
     own = client is None
@@ -323,6 +354,7 @@ def _run_distributed(scenario, built, seed, todo, bounds, chunk, client, workers
                 chunk,
                 device=device,
                 built=built,
+                study_runs=runs,
                 pure=False,
             ): c
             for c in todo

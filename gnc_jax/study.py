@@ -7,7 +7,6 @@ Run ``i`` of a study with root seed ``s`` always uses the key
 the chunking, the devices, the workers or on resuming.
 """
 
-import contextlib
 import dataclasses
 import hashlib
 import sys
@@ -17,7 +16,6 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from ._numerics import explicit_loop_shape, for_platform, using_loop_shape
 from ._status import Status
 from .backend import describe, require, select
 from .montecarlo import (
@@ -29,6 +27,7 @@ from .montecarlo import (
     _run_distributed,
     _run_local,
     build_on,
+    study_layout,
 )
 from .planner import estimate_cost, plan_chunk
 from .results import save_study, summarize
@@ -220,7 +219,7 @@ def run_study(
     plan = LocalPlan(backend, n_devices, max_memory_fraction, fixed, None, built)
     todo = chunks_left(out, bounds) if resume else list(range(n_chunks))
     if not distributed and todo:
-        with _study_layout(system, backend, runs, chunk // n_dev):
+        with study_layout(system, backend, runs, chunk // n_dev):
             plan = _compile_local(system, keys, chunk, plan)
     store = None if out is None else StudyStore(out, manifest, resume, overwrite)
     try:
@@ -235,22 +234,6 @@ def run_study(
     finally:
         if store is not None:
             store.close()
-
-
-def _study_layout(system, backend, runs: int, lanes: int):
-    """The loop layout a local study compiles in: the system's CPU layout with its ``rare``
-    path on where the system declares one (:attr:`AbstractSystem.rare_layout`) and the study
-    is large enough to repay it, else the default (a layout the caller set is kept)."""
-    rare = system.rare_layout
-    if (
-        rare is None
-        or explicit_loop_shape() is not None
-        or backend.platform != "cpu"
-        or runs < rare.min_runs
-        or lanes < rare.min_lanes
-    ):
-        return contextlib.nullcontext()
-    return using_loop_shape(for_platform("cpu", system)._replace(rare=rare.fraction))
 
 
 def check_seed(seed) -> int:
@@ -386,7 +369,7 @@ def _run_chunks(
         if distributed:
             compile_s, errors, n_workers, t0 = _run_distributed(
                 scenario, plan.built, seed, todo, bounds, chunk, client, workers, finished,
-                device,
+                device, runs,
             )  # fmt: skip
             t0 += compile_s  # the workers compile first, all at once
         else:

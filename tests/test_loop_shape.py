@@ -179,9 +179,37 @@ def test_impactor_rare_layout_matches_within_batch_tolerance(gravity):
     assert_same_outcomes(rare, default, system)
 
 
+def test_a_dask_worker_compiles_the_layout_of_the_whole_study(monkeypatch):
+    """A worker's chunk (run_chunk, one Dask task) is compiled in the layout a local study of
+    the whole study's runs would be, at the worker's own lanes a device, not its chunk's."""
+    from gnc_jax import montecarlo
+    from gnc_jax._numerics import RareLayout, explicit_loop_shape
+    from gnc_jax.backend import select
+
+    system = gj.get_system("impactor")
+    monkeypatch.setattr(type(system), "rare_layout", RareLayout(1 / 32, 1000, min_lanes=8))
+    scenario = gj.load_scenario(system.example, overrides=SHORT)
+    built = montecarlo.build_on(select("cpu"), scenario)
+    seen = []
+
+    class Compiled(Exception):
+        pass
+
+    def compile_(*args):
+        seen.append(explicit_loop_shape())
+        raise Compiled
+
+    monkeypatch.setattr(montecarlo, "_compile", compile_)
+    for study_runs in (1000, 999, None):
+        with pytest.raises(Compiled):
+            montecarlo.run_chunk(scenario, 11, 0, 64, 64, built=built, study_runs=study_runs)
+    on = for_platform("cpu", system)._replace(rare=1 / 32)
+    assert seen == [on, None, None]  # None: the platform's default layout
+
+
 def test_a_study_turns_the_rare_layout_on_only_where_it_pays():
     from gnc_jax.backend import Backend
-    from gnc_jax.study import _study_layout
+    from gnc_jax.montecarlo import study_layout
 
     system = gj.get_system("impactor")
     rare = system.rare_layout
@@ -189,7 +217,7 @@ def test_a_study_turns_the_rare_layout_on_only_where_it_pays():
     gpu = Backend("gpu", "NVIDIA H100", (0,), 1 << 36)
 
     def shape(backend, runs, lanes):
-        with _study_layout(system, backend, runs, lanes):
+        with study_layout(system, backend, runs, lanes):
             return layout_for(backend.platform, system)
 
     on = for_platform("cpu", system)._replace(rare=rare.fraction)

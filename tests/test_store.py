@@ -261,6 +261,8 @@ def test_a_chunk_that_raises_is_reported_and_the_rest_go_on(toy, reference, tmp_
     run_chunk = montecarlo.run_chunk
 
     def faulty(scenario, seed, start, stop, chunk, **options):
+        # a worker compiles the layout of the whole study (run_chunk): it is told its run count
+        assert options["study_runs"] == RUNS, options
         if start == 2 * CHUNK:
             raise FloatingPointError("injected")
         return run_chunk(scenario, seed, start, stop, chunk, **options)
