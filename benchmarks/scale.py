@@ -4,10 +4,10 @@
 
 * **throughput** -- ``deep-impact-los`` and ``lunar-skip-entry`` studies through
   ``gj.run_study``: on one XLA host device, on two (one per core, the default), and on a local
-  Dask cluster of two worker processes of one device each (``workers=2``), as runs/s and the
-  ratio to one device. Each configuration runs in its own process (the device count is fixed
-  when JAX starts), once to compile (and, for Dask, to fill the persistent compilation cache)
-  and then timed; compile time is reported apart.
+  Dask cluster of two worker processes (``local_cluster(2)``) of one device each and of two
+  (its default), as runs/s and the ratio to one device. Each configuration runs in its own
+  process (the device count is fixed when JAX starts), once to compile (and, for Dask, to fill
+  the persistent compilation cache) and then timed; compile time is reported apart.
 * **memory** -- a ``deep-impact-los`` study written to a directory (``out=``: every chunk to
   disk as it finishes, the summary from the chunk files) at 10k, 100k and 1M runs, each in a
   fresh process: its peak resident memory, which must not grow with N.
@@ -35,9 +35,10 @@ if kw.pop("to_disk", False):
     out = tempfile.mkdtemp(prefix="gnc-scale-")
 warm = kw.pop("warm", 0)
 workers = kw.pop("workers", None)
+host_devices = kw.pop("host_devices", None)
 if workers:  # one cluster for the warm-up and the timed study: its workers keep their compile
     from gnc_jax.montecarlo import local_cluster
-    kw["client"] = local_cluster(workers)
+    kw["client"] = local_cluster(workers, host_devices=host_devices)
 if warm:
     gj.run_study(sc, runs=warm, progress=False, **kw)
 t0 = time.perf_counter()
@@ -72,7 +73,10 @@ def throughput(scenario, runs, warm):
         "1 device": dict(env={"GNC_JAX_HOST_DEVICES": "1"}),
         "2 devices": dict(env={"GNC_JAX_HOST_DEVICES": "2"}),
         "Dask, 2 workers x 1 device": dict(
-            env={"GNC_JAX_HOST_DEVICES": "1", "JAX_COMPILATION_CACHE_DIR": cache}, workers=2
+            env={"JAX_COMPILATION_CACHE_DIR": cache}, workers=2, host_devices=1
+        ),
+        "Dask, 2 workers x 2 devices (default)": dict(
+            env={"JAX_COMPILATION_CACHE_DIR": cache}, workers=2
         ),
     }
     rows = []
@@ -128,8 +132,8 @@ def run(quick: bool = False) -> dict:
         markdown="\n".join(lines),
         notes=[
             "each row a fresh process; wall after compilation; Dask: a LocalCluster of 2 worker "
-            "processes (1 XLA device each, gnc_jax.montecarlo.local_cluster), warmed by a first "
-            "study on the same cluster, so its workers have compiled",
+            "processes (1 or 2 XLA devices each, gnc_jax.montecarlo.local_cluster), warmed by a "
+            "first study on the same cluster, so its workers have compiled",
             "memory rows: run_study(out=DIR), chunks written as they finish, summary read from "
             "the chunk files (only the columns the statistics use)",
         ],
@@ -152,7 +156,7 @@ def main():
             "lunar-skip-entry", n_cap, 32
         ):
             print(
-                f"{r['scenario']:18s} {r['config']:28s} {r['runs']:>7,} runs {r['wall_s']:8.2f} s "
+                f"{r['scenario']:18s} {r['config']:38s} {r['runs']:>7,} runs {r['wall_s']:8.2f} s "
                 f"{r['runs_per_s']:9,.0f} runs/s  x{r['vs_1_device']:.2f}  compile "
                 f"{r['compile_s']:.1f} s  failed {r['failed']}",
                 flush=True,

@@ -108,6 +108,67 @@ def test_dask_workers_share_a_gpu_without_preallocating_it(monkeypatch):
     assert montecarlo.worker_environment(2, 1)["XLA_PYTHON_CLIENT_MEM_FRACTION"] == "0.2"
 
 
+def test_a_local_worker_gets_its_host_devices_in_place_of_the_submitters(monkeypatch):
+    """Twice its share of the cores, at most the cores, in place of the count the submitting
+    process's XLA_FLAGS name (which a worker would otherwise inherit and keep)."""
+    monkeypatch.setattr(montecarlo.os, "cpu_count", lambda: 16)
+    flag = "--xla_force_host_platform_device_count"
+    monkeypatch.setenv("XLA_FLAGS", f"{flag}=16 --xla_cpu_enable_fast_math=false")
+    env = montecarlo.worker_environment(8, gpus=0)
+    assert env["GNC_JAX_HOST_DEVICES"] == "4"
+    assert env["XLA_FLAGS"] == f"{flag}=4 --xla_cpu_enable_fast_math=false"
+    monkeypatch.delenv("XLA_FLAGS")
+    assert montecarlo.worker_environment(32, gpus=0)["XLA_FLAGS"] == f"{flag}=2"
+    assert montecarlo.worker_environment(1, gpus=0)["GNC_JAX_HOST_DEVICES"] == "16"
+
+
+_WORKER_PROBE = """
+import os, sys
+import gnc_jax.cli  # as the gnc-jax command's main module: each spawned worker imports it again
+
+
+def probe():
+    import jax
+
+    return len(jax.devices()), jax.config.jax_compilation_cache_dir
+
+
+if __name__ == "__main__":
+    from gnc_jax.montecarlo import local_cluster
+
+    client = local_cluster(2)
+    seen = sorted(client.run(probe).values())
+    client.close()
+    cores = os.cpu_count() or 1
+    share = min(cores, 2 * max(1, cores // 2))
+    print(seen, share, os.environ.get("GNC_JAX_HOST_DEVICES"), os.environ.get("XLA_FLAGS"))
+"""
+
+
+def test_local_workers_start_with_their_environment_under_the_gnc_jax_command(tmp_path):
+    """A local cluster's worker process imports the submitting program's main module first;
+    under the gnc-jax command that configures JAX (gnc_jax._config) before Dask's post-start
+    environment: the workers' device count and compilation cache must be theirs from the
+    start, and the submitting process's environment is left as it was."""
+    pytest.importorskip("dask.distributed")
+    import os
+    import subprocess
+
+    script = tmp_path / "submit.py"
+    script.write_text(_WORKER_PROBE)
+    env = {**os.environ, "HOME": str(tmp_path), "GNC_JAX_HOST_DEVICES": "3"}
+    for var in ("XLA_FLAGS", "JAX_COMPILATION_CACHE_DIR"):
+        env.pop(var, None)
+    done = subprocess.run(
+        [sys.executable, str(script)], env=env, capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    seen, share, host_devices, flags = done.stdout.strip().splitlines()[-1].rsplit(" ", 3)
+    cache = str(tmp_path / ".cache" / "gnc_jax" / "xla")
+    assert seen == str([(int(share), cache)] * 2)
+    assert (host_devices, flags) == ("3", "--xla_force_host_platform_device_count=3")
+
+
 def test_the_host_device_flag_goes_before_a_bare_xla_token(monkeypatch):
     monkeypatch.setenv("XLA_FLAGS", "intra_op_parallelism_threads=1")
     monkeypatch.setenv("GNC_JAX_HOST_DEVICES", "3")
