@@ -71,7 +71,24 @@ init = front[0]["rows"]
 ax.plot(init["dv_mean"]["initial"], init["miss_rms"]["initial"], "ks", ms=9, label="(4, 1)")
 xs = [f["rows"]["dv_mean"]["tuned"] for f in front]
 ys = [f["rows"]["miss_rms"]["tuned"] for f in front]
-ax.plot(xs, ys, "o-", label="tuned")
+# A tuning is dominated when another weight's tuned gains have less miss and less Δv on the
+# same held-out runs: that weight's search stopped short of its optimum (a local one, or too
+# few steps). The front is drawn through the others only.
+dominated = [
+    any(x2 <= x and y2 <= y and (x2, y2) != (x, y) for x2, y2 in zip(xs, ys, strict=True))
+    for x, y in zip(xs, ys, strict=True)
+]
+kept = sorted((x, y) for x, y, d in zip(xs, ys, dominated, strict=True) if not d)
+ax.plot(*zip(*kept, strict=True), "o-", label="tuned")
+if any(dominated):
+    ax.plot(
+        [x for x, d in zip(xs, dominated, strict=True) if d],
+        [y for y, d in zip(ys, dominated, strict=True) if d],
+        "o",
+        mfc="none",
+        color="C0",
+        label="tuned, dominated (search stopped short)",
+    )
 for f, x, y in zip(front, xs, ys, strict=True):
     ax.annotate(
         f"w={f['weight']:g}: ({f['tuned'][0]:.2f}, {f['tuned'][1]:.2f})", (x, y), fontsize=8
