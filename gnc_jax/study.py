@@ -28,6 +28,7 @@ from .montecarlo import (
     _run_local,
     build_on,
     study_layout,
+    worker_environment,
 )
 from .planner import estimate_cost, plan_chunk
 from .results import save_study, summarize
@@ -201,8 +202,8 @@ def run_study(
     distributed = client is not None or workers is not None
     n_dev = min(n_devices or backend.count, backend.count)
     chunk = plan_chunk(
-        system, runs, chunk_size, backend, n_dev, cost, announce, distributed, max_memory_fraction,
-        _worker_count(client, workers),
+        system, runs, chunk_size, backend, _chunk_devices(backend, n_dev, client, workers), cost,
+        announce, distributed, max_memory_fraction, _worker_count(client, workers),
     )  # fmt: skip
     n_chunks = -(-runs // chunk)
     bounds = [(c * chunk, min((c + 1) * chunk, runs)) for c in range(n_chunks)]
@@ -408,6 +409,15 @@ class StudyError(RuntimeError):
     def __init__(self, message: str, errors: list):
         super().__init__(message)
         self.errors = errors
+
+
+def _chunk_devices(backend, n_dev: int, client, workers) -> int:
+    """Devices a chunk is planned for: this process's ``n_dev``, or on a local cluster of
+    ``workers`` CPU workers (no ``client``) one worker's host devices
+    (:func:`~gnc_jax.montecarlo.worker_environment`)."""
+    if client is None and workers is not None and backend.platform == "cpu":
+        return int(worker_environment(workers, 0)["GNC_JAX_HOST_DEVICES"])
+    return n_dev
 
 
 def _worker_count(client, workers) -> int:

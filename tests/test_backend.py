@@ -276,6 +276,21 @@ def test_a_dask_study_has_a_chunk_per_worker():
     assert chunk("deep-impact-los", 2000, 2) == 1000
 
 
+def test_a_local_clusters_chunks_are_planned_for_its_workers_devices(monkeypatch):
+    """A local cluster's chunk is sized for one worker's host devices (twice its share of the
+    cores), not the submitting process's; a cluster of one's own (a client) and a GPU keep
+    the submitting process's count."""
+    from gnc_jax.study import _chunk_devices
+
+    monkeypatch.setattr(montecarlo.os, "cpu_count", lambda: 16)
+    cpu = fake("cpu", count=16)
+    assert _chunk_devices(cpu, 16, None, 8) == 4
+    assert _chunk_devices(cpu, 16, None, 2) == 16
+    assert _chunk_devices(cpu, 16, None, None) == 16
+    assert _chunk_devices(cpu, 16, object(), None) == 16
+    assert _chunk_devices(fake("gpu", count=1), 1, None, 2) == 1
+
+
 @pytest.mark.parametrize(
     "name, runs",
     [("lunar-skip-entry", 100_000), ("bennu-apn", 200_000), ("bennu-apn", 2_000)],
